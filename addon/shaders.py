@@ -1,0 +1,146 @@
+"""OSL shader sources and their compilation into Script nodes.
+
+`shader_source(model)` assembles one self-contained OSL text from `osl/<model.shader>.osl`:
+the local headers are inlined (Cycles compiles INTERNAL scripts from a temporary file, where a
+local #include is not found), enum codes and the parameter list are generated from the catalog
+(so neither is written twice), and the documented clamps are inserted. The bpy part creates the
+text datablock and compiles it into a Script node, refusing loudly when compilation fails.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from .catalog import COLOR, ENUM, ENUMS, FLOAT, Model
+
+OSL_DIR = Path(__file__).resolve().parent.parent / "osl"
+TEXT_PREFIX = "MicrofacetLab_"
+_LOCAL_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
+_SYSTEM_HEADERS = {"stdcycles.h", "stdosl.h"}
+
+
+def enum_defines() -> str:
+    lines = ["// Generated from addon/catalog.py ENUMS."]
+    for enum, items in ENUMS.items():
+        for code, item in enumerate(items):
+            lines.append(f"#define MFL_{enum.upper()}_{item.upper()} {code}")
+    return "\n".join(lines) + "\n"
+
+
+def _osl_value(param, value) -> str:
+    if param.kind == COLOR:
+        return "color({:.9g}, {:.9g}, {:.9g})".format(*value)
+    if param.kind == ENUM:
+        return str(param.index(value))
+    return f"{float(value):.9g}"
+
+
+def osl_input_name(param) -> str:
+    """OSL shader parameters are read-only, so the clamped value lives in a local named after
+    the catalog id and the parameter (the Script node socket) carries this prefixed name."""
+    return "in_" + param.id
+
+
+def parameter_declarations(model: Model) -> str:
+    lines = []
+    for p in model.params:
+        if p.kind == ENUM:
+            meta = f'[[ int min = 0, int max = {len(p.items) - 1}, string help = "{" | ".join(p.items)}" ]]'
+            lines.append(f"    int {osl_input_name(p)} = {_osl_value(p, p.default)} {meta},")
+        else:
+            osl_type = "color" if p.kind == COLOR else "float"
+            lines.append(f"    {osl_type} {osl_input_name(p)} = {_osl_value(p, p.default)},")
+    return "\n".join(lines)
+
+
+def clamp_statements(model: Model) -> str:
+    """The catalog's clamp in OSL: NaN -> default, then [min, max] (per channel for colours)."""
+    lines = []
+    for p in model.params:
+        src = osl_input_name(p)
+        if p.kind == ENUM:
+            lines.append(f"    int {p.id} = clamp({src}, 0, {len(p.items) - 1});")
+        elif p.kind == FLOAT:
+            lines.append(f"    float {p.id} = clamp(safe_nan({src}, {_osl_value(p, p.default)}), "
+                         f"{p.min:.9g}, {p.max:.9g});")
+        else:
+            channels = ", ".join(f"clamp(safe_nan({src}[{c}], {p.default[c]:.9g}), {p.min:.9g}, {p.max:.9g})"
+                                 for c in range(3))
+            lines.append(f"    color {p.id} = color({channels});")
+    return "\n".join(lines)
+
+
+def _inline_headers(source: str, seen: set[str]) -> str:
+    def replace(match: re.Match) -> str:
+        name = match.group(1)
+        if name in _SYSTEM_HEADERS:
+            return match.group(0)
+        if name in seen:
+            return f"// {name}: already inlined"
+        seen.add(name)
+        header = (OSL_DIR / name).read_text()
+        return f"// ---- begin {name}\n{_inline_headers(header, seen)}\n// ---- end {name}"
+
+    return _LOCAL_INCLUDE.sub(replace, source)
+
+
+def shader_source(model: Model) -> str:
+    source = (OSL_DIR / f"{model.shader}.osl").read_text()
+    source = source.replace("    // @parameters", parameter_declarations(model))
+    source = source.replace("    // @clamp_parameters", clamp_statements(model))
+    source = _inline_headers(source, set())
+    # The enum codes precede everything, headers included.
+    return enum_defines() + source
+
+
+# --- bpy ------------------------------------------------------------------------------------
+
+def text_name(model: Model) -> str:
+    return f"{TEXT_PREFIX}{model.shader}.osl"
+
+
+def ensure_text(model: Model):
+    """The text datablock holding the model's OSL source, created or refreshed."""
+    import bpy
+
+    source = shader_source(model)
+    text = bpy.data.texts.get(text_name(model))
+    if text is None:
+        text = bpy.data.texts.new(text_name(model))
+    if text.as_string() != source:
+        text.clear()
+        text.write(source)
+    return text
+
+
+class ShaderCompileError(RuntimeError):
+    pass
+
+
+def compile_script_node(node, model: Model) -> None:
+    """Point an INTERNAL Script node at the model's text and compile it now.
+
+    Uses the Cycles add-on's own compile function, which works headless (the UI operator does
+    not). Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no
+    sockets and no bytecode; that case is turned into a loud error here.
+    """
+    from . import bundled  # noqa: F401  (exposes oslquery / OpenImageIO of the bpy wheel)
+
+    text = ensure_text(model)
+    node.mode = "INTERNAL"
+    node.script = text
+    messages = []
+
+    def report(kind, message):
+        messages.append(f"{kind}: {message}")
+
+    try:
+        from cycles import osl as cycles_osl
+        cycles_osl.update_script_node(node, report)
+    except ImportError:  # the Cycles add-on is absent: assigning the script compiled it already
+        pass
+    if not node.bytecode or len(node.outputs) == 0:
+        raise ShaderCompileError(
+            f"OSL compile of {text.name} produced no bytecode or no sockets"
+            + (": " + "; ".join(messages) if messages else
+               " (is Cycles OSL available? bpy.utils.expose_bundled_modules() missing?)"))

@@ -1,0 +1,80 @@
+"""Operators and menus: Add > Shader > Microfacet Lab (pattern of Blender's node_wrangler:
+classes in one tuple, a draw function appended to a built-in menu, both undone on unregister).
+"""
+import bpy
+
+from . import nodes
+from .catalog import MODELS
+
+
+class NODE_OT_microfacet_lab_add(bpy.types.Operator):
+    """Add a Microfacet Lab BSDF node group to the active shader node tree"""
+
+    bl_idname = "node.microfacet_lab_add"
+    bl_label = "Add Microfacet Lab BSDF"
+    bl_options = {"REGISTER", "UNDO"}
+
+    model: bpy.props.EnumProperty(
+        name="Model",
+        items=[(m.id, m.label, m.doc) for m in MODELS.values()],
+    )
+
+    @classmethod
+    def poll(cls, context):
+        space = context.space_data
+        return space is not None and getattr(space, "tree_type", "") == "ShaderNodeTree" \
+            and space.edit_tree is not None
+
+    def execute(self, context):
+        tree = context.space_data.edit_tree
+        if context.scene.render.engine != "CYCLES":
+            self.report({"WARNING"}, "Microfacet Lab shaders are OSL: they render in Cycles "
+                                     "with Open Shading Language enabled (CPU or OptiX)")
+        try:
+            node = nodes.add_group_node(tree, self.model)
+        except Exception as error:  # compile failure: report, leave the tree as it was
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        for other in tree.nodes:
+            other.select = False
+        node.select = True
+        tree.nodes.active = node
+        node.location = context.space_data.cursor_location
+        return {"FINISHED"}
+
+
+class NODE_MT_microfacet_lab(bpy.types.Menu):
+    bl_idname = "NODE_MT_microfacet_lab"
+    bl_label = "Microfacet Lab"
+
+    def draw(self, context):
+        for model in MODELS.values():
+            op = self.layout.operator(NODE_OT_microfacet_lab_add.bl_idname, text=model.label)
+            op.model = model.id
+
+
+def draw_add_menu(self, context):
+    if getattr(context.space_data, "tree_type", "") == "ShaderNodeTree":
+        self.layout.separator()
+        self.layout.menu(NODE_MT_microfacet_lab.bl_idname)
+
+
+classes = (NODE_OT_microfacet_lab_add, NODE_MT_microfacet_lab)
+# Add > Shader in Blender 4.2 to 5.x.
+ADD_MENU = "NODE_MT_category_shader_shader"
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    menu = getattr(bpy.types, ADD_MENU, None)
+    if menu is not None:
+        menu.append(draw_add_menu)
+
+
+def unregister():
+    menu = getattr(bpy.types, ADD_MENU, None)
+    if menu is not None:
+        menu.remove(draw_add_menu)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,316 @@
+// Microfacet Lab: shared OSL maths, the twin of addon/reference/{fresnel,microfacet}.py.
+// The add-on inlines this header into each shader's text block (Cycles compiles INTERNAL
+// scripts from a temporary file, so a local #include cannot be found; CYCLES_OSL.md).
+//
+// Conventions (shared/design/MODELS.md): local frame n = (0,0,1); wi points from the surface
+// toward the viewer (Cycles' I); wo points away from the surface; eta = n_t / n_i.
+// Enum codes (MFL_DISTRIBUTION_GGX, MFL_SAMPLER_VNDF, ...) are #defines the add-on generates
+// from addon/catalog.py ENUMS and places before this header.
+
+#define MFL_PI 3.14159265358979323846
+#define MFL_SQRT_PI 1.77245385090551602730
+// Below this alpha the lobe is a delta (perfect mirror): no division by a vanishing alpha.
+#define MFL_ALPHA_DELTA 1e-7
+// V-cavity masking is not a user choice (Cook-Torrance always uses it): code after the others.
+#define MFL_MASKING_VCAVITY 2
+
+// ---------------------------------------------------------------------------------------
+// Random numbers. Cycles exposes no per-sample random number to surface shaders, so hash
+// values that change every sample (hit point, direction, ray length), decorrelated per
+// dimension (CYCLES_OSL.md).
+vector rng_key()
+{
+    float ray_length = 0.0;
+    getattribute("path:ray_length", ray_length);
+    return vector(hashnoise(P, ray_length),
+                  hashnoise(I, ray_length + 0.5),
+                  hashnoise(P + I, ray_length * 1.7 + 0.25));
+}
+
+float rng(vector key, int dimension) { return hashnoise(key, float(dimension) + 0.5); }
+
+// ---------------------------------------------------------------------------------------
+// Local shading frame around the normal; the tangent follows dPdu where it is defined.
+void make_frame(normal n, output vector t, output vector b)
+{
+    vector u = dPdu - n * dot(n, dPdu);
+    if (length(u) < 1e-6) {
+        u = (abs(n[2]) < 0.9) ? cross(vector(0, 0, 1), n) : cross(vector(1, 0, 0), n);
+    }
+    t = normalize(u);
+    b = cross(n, t);
+}
+
+vector to_local(vector v, vector t, vector b, normal n)
+{
+    return vector(dot(v, t), dot(v, b), dot(v, n));
+}
+
+vector to_world(vector v, vector t, vector b, normal n) { return v[0] * t + v[1] * b + v[2] * n; }
+
+vector reflect_about(vector w, vector m) { return 2.0 * dot(w, m) * m - w; }
+
+float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
+
+// ---------------------------------------------------------------------------------------
+// Fresnel. Exact unpolarised dielectric (Cook & Torrance 1982 eq. 9; seed eq. 2-6):
+// c = |wi.m|, g^2 = eta^2 - 1 + c^2; total internal reflection (g^2 < 0) gives 1.
+float fresnel_dielectric(float cos_i, float eta)
+{
+    float c = min(abs(cos_i), 1.0);
+    float g2 = eta * eta - 1.0 + c * c;
+    if (g2 < 0.0)
+        return 1.0;
+    float g = sqrt(g2);
+    float a = (g - c) / (g + c);
+    float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+    return 0.5 * a * a * (1.0 + b * b);
+}
+
+// Exact conductor Fresnel for complex IOR n + ik seen from vacuum (Born & Wolf sec. 14.2;
+// the closed form of Rs, Rp without complex arithmetic). n >= 0.001 keeps it finite at c = 0.
+float fresnel_conductor(float cos_i, float n, float k)
+{
+    float c = min(abs(cos_i), 1.0);
+    float c2 = c * c;
+    float s2 = 1.0 - c2;
+    float t0 = n * n - k * k - s2;
+    float a2b2 = sqrt(t0 * t0 + 4.0 * n * n * k * k);
+    float a = sqrt(max(0.5 * (a2b2 + t0), 0.0));
+    float t1 = a2b2 + c2;
+    float t2 = 2.0 * a * c;
+    float rs = (t1 - t2) / (t1 + t2);
+    float t3 = c2 * a2b2 + s2 * s2;
+    float t4 = t2 * s2;
+    float rp = rs * (t3 - t4) / (t3 + t4);
+    return 0.5 * (rp + rs);
+}
+
+color fresnel_conductor(float cos_i, color n, color k)
+{
+    return color(fresnel_conductor(cos_i, n[0], k[0]),
+                 fresnel_conductor(cos_i, n[1], k[1]),
+                 fresnel_conductor(cos_i, n[2], k[2]));
+}
+
+// Inverse error function: Giles 2010, "Approximating the erfinv function" (single precision).
+float erfinv(float x_in)
+{
+    float x = clamp(x_in, -0.99999994, 0.99999994);
+    float w = -log((1.0 - x) * (1.0 + x));
+    float p;
+    if (w < 5.0) {
+        w = w - 2.5;
+        p = 2.81022636e-08;
+        p = 3.43273939e-07 + p * w;
+        p = -3.5233877e-06 + p * w;
+        p = -4.39150654e-06 + p * w;
+        p = 0.00021858087 + p * w;
+        p = -0.00125372503 + p * w;
+        p = -0.00417768164 + p * w;
+        p = 0.246640727 + p * w;
+        p = 1.50140941 + p * w;
+    }
+    else {
+        w = sqrt(w) - 3.0;
+        p = -0.000200214257;
+        p = 0.000100950558 + p * w;
+        p = 0.00134934322 + p * w;
+        p = -0.00367342844 + p * w;
+        p = 0.00573950773 + p * w;
+        p = -0.0076224613 + p * w;
+        p = 0.00943887047 + p * w;
+        p = 1.00167406 + p * w;
+        p = 2.83297682 + p * w;
+    }
+    return p * x;
+}
+
+// ---------------------------------------------------------------------------------------
+// Distributions of normals (Walter 2007 eqs. 25, 33; anisotropic form: Heitz 2014 eq. 71).
+// e = tan^2(theta_m) weighted by the roughness along each axis.
+float D(int dist, vector m, float ax, float ay)
+{
+    if (m[2] <= 0.0)
+        return 0.0;
+    float z2 = m[2] * m[2];
+    float e = (m[0] * m[0] / (ax * ax) + m[1] * m[1] / (ay * ay)) / z2;
+    if (dist == MFL_DISTRIBUTION_GGX)
+        return 1.0 / (MFL_PI * ax * ay * z2 * z2 * (1.0 + e) * (1.0 + e));
+    return exp(-e) / (MFL_PI * ax * ay * z2 * z2);
+}
+
+// Smith Lambda (Heitz 2014 eqs. 72, 86): GGX closed form, Beckmann exact with erf.
+float lambda_(int dist, vector w, float ax, float ay)
+{
+    if (w[2] <= 0.0)
+        return 1e30;
+    float r2 = ax * ax * w[0] * w[0] + ay * ay * w[1] * w[1];  // alpha^2 tan^2 * cos^2
+    if (r2 <= 0.0)
+        return 0.0;
+    if (dist == MFL_DISTRIBUTION_GGX)
+        return 0.5 * (-1.0 + sqrt(1.0 + r2 / (w[2] * w[2])));
+    float a = w[2] / sqrt(r2);  // 1 / (alpha tan(theta))
+    if (a > 6.0)
+        return 0.0;  // exp(-36) below float precision
+    return 0.5 * (erf(a) - 1.0) + exp(-a * a) / (2.0 * a * MFL_SQRT_PI);
+}
+
+// Smith G1 (Walter 2007 eq. 23 / Heitz 2014 eq. 43).
+float G1(int dist, vector w, vector m, float ax, float ay)
+{
+    if (dot(w, m) * w[2] <= 0.0)
+        return 0.0;
+    return 1.0 / (1.0 + lambda_(dist, w, ax, ay));
+}
+
+// V-cavity G1 (Heitz 2014 eq. 55; Torrance-Sparrow / Cook-Torrance G).
+float G1_vcavity(vector w, vector m)
+{
+    float wm = dot(w, m);
+    if (wm * w[2] <= 0.0)
+        return 0.0;
+    return min(1.0, 2.0 * m[2] * w[2] / wm);
+}
+
+// G2: height-correlated Smith (Heitz 2014 eq. 99), separable Smith (Walter 2007 eq. 23),
+// or V-cavity min(G1(wi), G1(wo)) (Heitz 2014 eq. 57), for reflection.
+float G2(int masking, int dist, vector wi, vector wo, vector m, float ax, float ay)
+{
+    if (masking == MFL_MASKING_VCAVITY)
+        return min(G1_vcavity(wi, m), G1_vcavity(wo, m));
+    if (dot(wi, m) * wi[2] <= 0.0 || dot(wo, m) * wo[2] <= 0.0)
+        return 0.0;
+    float li = lambda_(dist, wi, ax, ay);
+    float lo = lambda_(dist, wo, ax, ay);
+    if (masking == MFL_MASKING_SEPARABLE)
+        return 1.0 / ((1.0 + li) * (1.0 + lo));
+    return 1.0 / (1.0 + li + lo);
+}
+
+// ---------------------------------------------------------------------------------------
+// Samplers. Each returns a microfacet normal m in the local frame.
+
+// Slopes of the alpha = 1 distribution, radius^2 from the inverse radial CDF of P22.
+float standard_slope_radius2(int dist, float u)
+{
+    float v = min(u, 0.99999994);
+    if (dist == MFL_DISTRIBUTION_GGX)
+        return v / (1.0 - v);  // Walter 2007 eq. 35
+    return -log(1.0 - v);      // Walter 2007 eq. 28
+}
+
+// m ~ D(m)(m.n) (Walter 2007 sec. 5.3): stretch standard slopes by (ax, ay).
+vector sample_dcos(int dist, float ax, float ay, float u1, float u2)
+{
+    float r = sqrt(standard_slope_radius2(dist, u1));
+    float phi = 2.0 * MFL_PI * u2;
+    return normalize(vector(-r * cos(phi) * ax, -r * sin(phi) * ay, 1.0));
+}
+
+// Beckmann visible slopes for alpha = 1 (Heitz & d'Eon 2014 sec. 4; Jakob 2014): invert
+// C(x) = [(1 + erf x)/2 + tan(t) exp(-x^2)/(2 sqrt(pi))] / (1 + Lambda) on (-inf, cot t]
+// by safeguarded Newton-bisection, then y = erfinv(2 u2 - 1).
+void sample_beckmann_visible_slopes(float cos_t, float u1, float u2,
+                                    output float sx, output float sy)
+{
+    if (cos_t > 0.99999) {
+        float r = sqrt(-log(1.0 - min(u1, 0.99999994)));
+        sx = r * cos(2.0 * MFL_PI * u2);
+        sy = r * sin(2.0 * MFL_PI * u2);
+        return;
+    }
+    float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+    float tan_t = sin_t / cos_t;
+    float cot_t = cos_t / sin_t;
+    float lam = lambda_(MFL_DISTRIBUTION_BECKMANN, vector(sin_t, 0, cos_t), 1.0, 1.0);
+    float norm = 1.0 / (1.0 + lam);
+    float lo = -6.0;
+    float hi = min(cot_t, 6.0);
+    float x = 0.5 * (lo + hi);
+    for (int i = 0; i < 24; ++i) {
+        float cdf = (0.5 * (1.0 + erf(x)) + tan_t * exp(-x * x) / (2.0 * MFL_SQRT_PI)) * norm;
+        float err = cdf - u1;
+        if (err > 0.0)
+            hi = x;
+        else
+            lo = x;
+        float pdf = (1.0 - x * tan_t) * exp(-x * x) / MFL_SQRT_PI * norm;
+        float next = (pdf > 0.0) ? x - err / pdf : 0.5 * (lo + hi);
+        x = (next > lo && next < hi) ? next : 0.5 * (lo + hi);
+    }
+    sx = x;
+    sy = erfinv(2.0 * u2 - 1.0);
+}
+
+// m ~ D_wi(m) = G1(wi,m) <wi,m>+ D(m) / (wi.n) (Heitz & d'Eon 2014 eq. 2).
+// GGX: spherical caps (Dupuy & Benyoub 2023, listing 3). Beckmann: slope inversion above.
+vector sample_vndf(int dist, vector wi, float ax, float ay, float u1, float u2)
+{
+    vector wi_std = normalize(vector(ax * wi[0], ay * wi[1], wi[2]));
+    if (dist == MFL_DISTRIBUTION_GGX) {
+        float phi = 2.0 * MFL_PI * u1;
+        float z = (1.0 - u2) * (1.0 + wi_std[2]) - wi_std[2];
+        float sin_t = sqrt(clamp(1.0 - z * z, 0.0, 1.0));
+        vector h = vector(sin_t * cos(phi), sin_t * sin(phi), z) + wi_std;
+        return normalize(vector(ax * h[0], ay * h[1], max(h[2], 0.0)));
+    }
+    float sx, sy;
+    sample_beckmann_visible_slopes(wi_std[2], u1, u2, sx, sy);
+    // Rotate the slopes to the azimuth of wi, then unstretch (Heitz & d'Eon 2014 alg. 1).
+    float rxy = sqrt(wi_std[0] * wi_std[0] + wi_std[1] * wi_std[1]);
+    float cphi = (rxy > 0.0) ? wi_std[0] / rxy : 1.0;
+    float sphi = (rxy > 0.0) ? wi_std[1] / rxy : 0.0;
+    float tx = cphi * sx - sphi * sy;
+    float ty = sphi * sx + cphi * sy;
+    return normalize(vector(-tx * ax, -ty * ay, 1.0));
+}
+
+// V-cavity visible normals (Heitz 2014 sec. 6 / seed fig. 14): m ~ D cos, then its mirror
+// m' = (-m.x, -m.y, m.z) with probability <wi,m'>+ / (<wi,m>+ + <wi,m'>+).
+vector sample_vcavity(int dist, vector wi, float ax, float ay, float u1, float u2, float u3)
+{
+    vector m = sample_dcos(dist, ax, ay, u1, u2);
+    vector m_mirror = vector(-m[0], -m[1], m[2]);
+    float a = max(dot(wi, m), 0.0);
+    float b = max(dot(wi, m_mirror), 0.0);
+    return (u3 * (a + b) < b) ? m_mirror : m;
+}
+
+// ---------------------------------------------------------------------------------------
+// One reflection sample of a single-scattering microfacet BRDF: returns the normal m that
+// mirrors wi into wo, and the sample weight without Fresnel, f cos / (F pdf), in closed form
+// per sampler (seed eq. 4-7 and fig. 12; Heitz & d'Eon 2014 eq. 8; Heitz 2014 sec. 6):
+//   dcos:    G2 |wi.m| / (|wi.n| |m.n|)        (unbounded)
+//   vndf:    G2 / G1(wi)                       (Smith G1 of `dist`; in [0, 1] for Smith G2)
+//   vcavity: G2 / G1_vcavity(wi, m)            (in [0, 1] for V-cavity G2)
+float sample_reflection(int sampler, int dist, int masking, vector wi, float ax, float ay,
+                        vector key, output vector m)
+{
+    m = vector(0, 0, 1);
+    if (wi[2] <= 0.0)
+        return 0.0;
+    if (max(ax, ay) < MFL_ALPHA_DELTA)
+        return 1.0;  // perfect mirror: G2 = G1 = 1
+    float u1 = rng(key, 0);
+    float u2 = rng(key, 1);
+    float inv_pdf_factor;
+    if (sampler == MFL_SAMPLER_DCOS) {
+        m = sample_dcos(dist, ax, ay, u1, u2);
+        inv_pdf_factor = abs(dot(wi, m)) / (wi[2] * m[2]);
+    }
+    else if (sampler == MFL_SAMPLER_VNDF) {
+        m = sample_vndf(dist, wi, ax, ay, u1, u2);
+        float g1 = G1(dist, wi, m, ax, ay);
+        inv_pdf_factor = (g1 > 0.0) ? 1.0 / g1 : 0.0;
+    }
+    else {
+        m = sample_vcavity(dist, wi, ax, ay, u1, u2, rng(key, 2));
+        float g1 = G1_vcavity(wi, m);
+        inv_pdf_factor = (g1 > 0.0) ? 1.0 / g1 : 0.0;
+    }
+    vector wo = reflect_about(wi, m);
+    if (wo[2] <= 0.0)
+        return 0.0;
+    return G2(masking, dist, wi, wo, m, ax, ay) * inv_pdf_factor;
+}
