@@ -1,0 +1,170 @@
+"""The extension package: manifest validation, zip contents, and an install into a fresh bpy.
+
+The zip is built once (module fixture) by scripts/build_package.py, which runs the extension tool
+bundled in the bpy wheel. The install test runs Blender's own "Install from Disk" operator in a
+separate process with a throw-away user resource directory, then builds every model's node group
+from the INSTALLED copy (bl_ext.user_default.microfacet_lab), so a file missing from the zip shows
+up as an import or OSL compile failure.
+"""
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from addon.catalog import MODELS
+from bpy_helpers import run_bpy_script
+
+ROOT = Path(__file__).resolve().parent.parent
+EXT_ID = "microfacet_lab"
+MODULE = f"bl_ext.user_default.{EXT_ID}"
+
+
+def _load_build_package():
+    spec = importlib.util.spec_from_file_location("build_package", ROOT / "scripts" / "build_package.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+build_package = _load_build_package()
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory) -> Path:
+    return build_package.build(ROOT, tmp_path_factory.mktemp("dist"))
+
+
+def test_manifest_validates():
+    output = build_package.validate(ROOT)
+    assert "Success" in output, output
+    data = build_package.manifest(ROOT)
+    assert data["id"] == EXT_ID and data["type"] == "add-on"
+    assert "permissions" not in data
+    assert len(data["tagline"]) < 64
+
+
+def test_validator_checks_tags(tmp_path):
+    """The tags really are checked against Blender's list (the standalone tool checks none)."""
+    text = (ROOT / "blender_manifest.toml").read_text()
+    assert '"Material"' in text
+    shutil.copy(ROOT / "__init__.py", tmp_path)
+    (tmp_path / "blender_manifest.toml").write_text(text)
+    build_package.validate(tmp_path)  # the copy alone validates ...
+    (tmp_path / "blender_manifest.toml").write_text(text.replace('"Material"', '"No Such Tag"', 1))
+    with pytest.raises(build_package.BuildError, match="No Such Tag"):  # ... a bad tag does not
+        build_package.validate(tmp_path)
+
+
+def test_zip_contents(package):
+    assert package.name == f"{EXT_ID}-{build_package.manifest(ROOT)['version']}.zip"
+    with zipfile.ZipFile(package) as zf:
+        names = set(zf.namelist())
+    files = {n for n in names if not n.endswith("/")}
+    assert {"__init__.py", "blender_manifest.toml", "addon/__init__.py", "addon/catalog.py",
+            "addon/nodes.py", "addon/ui.py", "addon/shaders.py", "osl/microfacet.h"} <= files
+    for model in MODELS.values():
+        assert f"osl/{model.shader}.osl" in files
+    for path in (ROOT / "osl").iterdir():
+        if path.is_file() and not path.name.startswith("."):
+            assert f"osl/{path.name}" in files
+    allowed_top = {"__init__.py", "blender_manifest.toml", "addon", "osl", "presets", "README.md"}
+    for name in files:
+        top = name.split("/")[0]
+        assert top in allowed_top or top.startswith("LICENSE"), f"unexpected file in package: {name}"
+        assert "__pycache__" not in name and not name.endswith((".pyc", ".pyo")), name
+        assert not any(part.startswith(".") for part in name.split("/")), name
+        if top == "addon":
+            assert name.endswith(".py"), f"non-Python file under addon/: {name}"
+    if (ROOT / "README.md").is_file():
+        assert "README.md" in files
+
+
+INSTALL_SCRIPT = '''
+import os, sys
+zip_path = sys.argv[1]
+import bpy
+bpy.utils.expose_bundled_modules()
+
+scene = bpy.context.scene
+scene.render.engine = "CYCLES"
+scene.cycles.shading_system = True
+
+out = {"user_resources": bpy.utils.resource_path("USER")}
+repo = next(r for r in bpy.context.preferences.extensions.repos if r.module == "user_default")
+out["repo_dir"] = repo.directory
+out["op"] = sorted(bpy.ops.extensions.package_install_files(
+    filepath=zip_path, repo="user_default", enable_on_install=True))
+out["enabled"] = "bl_ext.user_default.microfacet_lab" in bpy.context.preferences.addons
+
+import importlib
+ext = importlib.import_module("bl_ext.user_default.microfacet_lab")
+out["ext_file"] = ext.__file__
+out["operator_registered"] = hasattr(bpy.types, "NODE_OT_microfacet_lab_add")
+out["operator_in_ops"] = "microfacet_lab_add" in dir(bpy.ops.node)
+out["menu_registered"] = hasattr(bpy.types, "NODE_MT_microfacet_lab")
+
+catalog = importlib.import_module(ext.__name__ + ".addon.catalog")
+nodes = importlib.import_module(ext.__name__ + ".addon.nodes")
+shaders = importlib.import_module(ext.__name__ + ".addon.shaders")
+out["osl_dir"] = str(shaders.OSL_DIR)
+groups = {}
+for model_id in catalog.MODELS:
+    group = nodes.ensure_group(model_id)
+    script = group.nodes[nodes.SCRIPT_NODE_NAME]
+    groups[model_id] = {
+        "name": group.name,
+        "bytecode_len": len(script.bytecode),
+        "outputs": [s.name for s in script.outputs],
+        "inputs": len(script.inputs),
+    }
+out["groups"] = groups
+out["models"] = list(catalog.MODELS)
+report(out)
+'''
+
+
+def test_install_in_fresh_blender(package, tmp_path):
+    user = tmp_path / "user_resources"
+    user.mkdir()
+    out = run_bpy_script(INSTALL_SCRIPT, tmp_path, str(package),
+                         env={"BLENDER_USER_RESOURCES": str(user)})
+    log = out.pop("_log")
+    assert Path(out["user_resources"]).resolve() == user.resolve(), log
+    assert Path(out["repo_dir"]).resolve().is_relative_to(user.resolve()), log
+    assert out["op"] == ["FINISHED"], log
+    assert out["enabled"], log
+    installed = Path(out["repo_dir"]) / EXT_ID
+    # The add-on that runs is the installed copy, not the repository.
+    assert Path(out["ext_file"]).resolve() == (installed / "__init__.py").resolve(), log
+    assert Path(out["osl_dir"]).resolve() == (installed / "osl").resolve(), log
+    assert out["operator_registered"] and out["operator_in_ops"] and out["menu_registered"], log
+    assert out["models"] == list(MODELS), log
+    for model_id, group in out["groups"].items():
+        assert group["bytecode_len"] > 0, f"{model_id}: no bytecode\n{log}"
+        assert "BSDF" in group["outputs"], f"{model_id}: outputs {group['outputs']}\n{log}"
+        assert group["inputs"] == len(MODELS[model_id].params), f"{model_id}\n{log}"
+
+
+def test_build_script_cli(tmp_path):
+    """`make package` entry point: prints the zip path, exit 0; non-zero with a message on failure."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_package.py"),
+                           "--output-dir", str(tmp_path)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert Path(proc.stdout.strip().splitlines()[-1]).is_file()
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    shutil.copy(ROOT / "__init__.py", bad)
+    (bad / "blender_manifest.toml").write_text(
+        (ROOT / "blender_manifest.toml").read_text().replace('version = "0.1.0"', 'version = "x"', 1))
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_package.py"),
+                           "--source-dir", str(bad), "--output-dir", str(tmp_path / "o")],
+                          capture_output=True, text=True)
+    assert proc.returncode != 0
+    assert "build_package: error:" in proc.stderr and "version" in proc.stderr, proc.stderr
