@@ -1,0 +1,214 @@
+"""The sphere-grid scene in numpy: layout, environments, per-pixel geometry, reference image.
+
+No bpy here: the render harness (addon/harness.py) builds the same scene in Blender from these
+objects, and the tests compare the two.
+
+Geometry: an orthographic camera on +z looks down -z, so every pixel sees the view direction
+wi = (0, 0, 1) and, on a sphere, exactly one normal n (Cycles renders point-cloud points as exact
+spheres). With a pixel filter of 0.01 px the render samples the pixel centre. Spheres are
+invisible to secondary rays, so a pixel's value is exactly
+    integral f(wi, wo) |wo.n| L(wo) dwo           (CYCLES_OSL.md, "Reference images").
+Environments are linear in the direction, L(w) = a + b (w.d), which Blender's world nodes express
+exactly (Texture Coordinate > Generated is the world direction), so the integral reduces to the
+moments of the BSDF: a E(mu) + b (Vn(mu) (d.n) + Vt(mu) (d.t)), t the unit tangent toward wi.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+VIEW = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Environment:
+    """L(w) = constant + gradient * (w . direction), in world space."""
+
+    name: str
+    constant: float
+    gradient: float = 0.0
+    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    def unit_direction(self) -> np.ndarray:
+        d = np.asarray(self.direction, dtype=float)
+        return d / np.linalg.norm(d)
+
+    def radiance(self, w: np.ndarray) -> np.ndarray:
+        return self.constant + self.gradient * (w @ self.unit_direction())
+
+
+WHITE = Environment("white furnace", 1.0)
+# Smooth, non-uniform and positive everywhere: from 0.05 to 0.95, brightest up and to the right.
+GRADIENT = Environment("gradient", 0.5, 0.45, (0.6, 0.48, 0.64))
+ENVIRONMENTS = {"white": WHITE, "gradient": GRADIENT}
+
+
+@dataclass(frozen=True)
+class GridLayout:
+    rows: int
+    cols: int
+    cell_px: int = 32  # pixels per sphere cell (the sphere's diameter is cell_px / spacing * 2)
+    spacing: float = 2.2  # centre-to-centre distance in world units (radius 1)
+    radius: float = 1.0
+
+    @property
+    def width(self) -> int:
+        return self.cols * self.cell_px
+
+    @property
+    def height(self) -> int:
+        return self.rows * self.cell_px
+
+    @property
+    def ortho_scale(self) -> float:
+        # Blender's orthographic scale spans the larger image dimension (sensor fit AUTO).
+        return max(self.cols, self.rows) * self.spacing
+
+    @property
+    def count(self) -> int:
+        return self.rows * self.cols
+
+    def centers(self) -> np.ndarray:
+        """World (x, y) of sphere i = row * cols + col; row 0 is the top row of the image."""
+        i = np.arange(self.count)
+        row, col = np.divmod(i, self.cols)
+        x = (col - (self.cols - 1) / 2) * self.spacing
+        y = ((self.rows - 1) / 2 - row) * self.spacing
+        return np.stack([x, y], axis=-1)
+
+    def pixel_world_xy(self) -> np.ndarray:
+        """World (x, y) of every pixel centre, shape (H, W, 2); image row 0 at the top."""
+        scale = self.ortho_scale / max(self.width, self.height)
+        cols = (np.arange(self.width) + 0.5 - self.width / 2) * scale
+        rows = (self.height / 2 - np.arange(self.height) - 0.5) * scale
+        x, y = np.meshgrid(cols, rows)
+        return np.stack([x, y], axis=-1)
+
+    def pixel_geometry(self):
+        """Per pixel: sphere index (-1 outside), world normal (H, W, 3), mu = n.wi."""
+        xy = self.pixel_world_xy()
+        centers = self.centers()
+        scale = self.ortho_scale / max(self.width, self.height)
+        cell = np.floor((xy + self.spacing * np.array([self.cols, self.rows]) / 2)
+                        / self.spacing).astype(int)
+        col, row_from_bottom = cell[..., 0], cell[..., 1]
+        row = self.rows - 1 - row_from_bottom
+        inside_grid = (col >= 0) & (col < self.cols) & (row >= 0) & (row < self.rows)
+        index = np.where(inside_grid, row * self.cols + col, -1)
+        local = (xy - centers[np.clip(index, 0, None)]) / self.radius
+        r2 = (local ** 2).sum(-1)
+        # A pixel counts as sphere only if the filter footprint (0.01 px) is fully inside.
+        inside = inside_grid & (np.sqrt(r2) < 1.0 - 0.02 * scale / self.radius)
+        index = np.where(inside, index, -1)
+        nz = np.sqrt(np.clip(1.0 - r2, 0.0, 1.0))
+        normal = np.concatenate([local, nz[..., None]], axis=-1)
+        normal[~inside] = 0.0
+        return index, normal, np.where(inside, nz, 0.0)
+
+
+def tangent_toward_view(normal: np.ndarray) -> np.ndarray:
+    """Unit tangent t with wi = mu n + sqrt(1 - mu^2) t (zero at mu = 1, where Vt = 0)."""
+    mu = normal[..., 2:3]
+    t = VIEW - mu * normal
+    norm = np.linalg.norm(t, axis=-1, keepdims=True)
+    return np.divide(t, norm, out=np.zeros_like(t), where=norm > 1e-12)
+
+
+def reference_image(layout: GridLayout, tables: list, env: Environment, moments_at) -> np.ndarray:
+    """Reference RGB image of the grid: tables[i] is sphere i's tabulated moments (E, Vn, Vt)
+    as returned by `addon.reference.quadrature.tabulate_moments`; `moments_at(table, mu)`
+    interpolates them. Background pixels get the environment seen straight down (L(-z))."""
+    index, normal, mu = layout.pixel_geometry()
+    image = np.empty(index.shape + (3,))
+    image[:] = env.radiance(-VIEW)
+    d = env.unit_direction()
+    tangent = tangent_toward_view(normal)
+    for i, table in enumerate(tables):
+        sel = index == i
+        if table is None or not sel.any():
+            continue
+        E, Vn, Vt = moments_at(table, mu[sel])
+        dn = (normal[sel] @ d)[:, None]
+        dt = (tangent[sel] @ d)[:, None]
+        image[sel] = env.constant * E + env.gradient * (Vn * dn + Vt * dt)
+    return image
+
+
+@dataclass
+class BandStats:
+    """Per sphere and band of mu: mean residual, its standard error and the mean reference."""
+
+    sphere: int
+    band: tuple[float, float]
+    n: int
+    bias: np.ndarray  # (3,) mean of render - reference
+    stderr: np.ndarray  # (3,) std of the per-pixel residual / sqrt(n)
+    reference: np.ndarray  # (3,) mean reference value
+
+
+MU_BANDS = ((0.05, 0.35), (0.35, 0.75), (0.75, 1.0001))
+
+
+def band_stats(layout: GridLayout, render: np.ndarray, reference: np.ndarray,
+               bands=MU_BANDS) -> list[BandStats]:
+    """Bias of `render` against `reference` per sphere and band of mu, with its noise.
+
+    Pixels are independent samples (each pixel has its own random streams), so the standard
+    error of a band's mean residual is the scatter of its per-pixel residuals over sqrt(n).
+    """
+    index, _, mu = layout.pixel_geometry()
+    residual = render[..., :3] - reference[..., :3]
+    out = []
+    for i in range(layout.count):
+        for lo, hi in bands:
+            sel = (index == i) & (mu >= lo) & (mu < hi)
+            n = int(sel.sum())
+            if n < 8:
+                continue
+            r = residual[sel]
+            out.append(BandStats(i, (lo, hi), n, r.mean(0), r.std(0, ddof=1) / np.sqrt(n),
+                                 reference[sel][:, :3].mean(0)))
+    return out
+
+
+@dataclass(frozen=True)
+class SphereSpec:
+    """One sphere of a grid: a catalog model with parameter values, and a short label."""
+
+    model_id: str
+    values: dict
+    label: str = ""
+
+
+def reference_tables(specs: list) -> list:
+    """Tabulated BSDF moments for each sphere (None for a gap), by converged quadrature of the
+    model's evaluation formula (addon/reference/quadrature.py)."""
+    from .reference import make_bsdf
+    from .reference.quadrature import tabulate_moments
+
+    cache = {}
+    tables = []
+    for spec in specs:
+        if spec is None:
+            tables.append(None)
+            continue
+        key = (spec.model_id, tuple(sorted((k, str(v)) for k, v in spec.values.items())))
+        if key not in cache:
+            cache[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
+        tables.append(cache[key])
+    return tables
+
+
+def reference_grid_image(layout: GridLayout, specs: list, env: Environment) -> np.ndarray:
+    from .reference.quadrature import moments_at
+
+    return reference_image(layout, reference_tables(specs), env, moments_at)
+
+
+def sidak_z(tests: int, family_alpha: float = 1e-3) -> float:
+    """Two-sided z threshold for `tests` comparisons at family-wise error `family_alpha`."""
+    from statistics import NormalDist
+
+    alpha = 1.0 - (1.0 - family_alpha) ** (1.0 / max(tests, 1))
+    return NormalDist().inv_cdf(1.0 - alpha / 2.0)

@@ -1,0 +1,241 @@
+"""Render harness: the sphere grid of addon/grid.py built and rendered headless in Cycles.
+
+One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back with the
+OpenImageIO bundled in bpy (`render`). Settings that silently change results (CYCLES_OSL.md) are
+pinned: no Filter Glossy, no clamping, caustics on, no adaptive sampling, no denoising, and a
+0.01 px pixel filter so that a pixel sees one normal.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+import bpy
+import numpy as np
+
+from . import bundled  # noqa: F401  (bundled OpenImageIO and oslquery on sys.path)
+from . import nodes
+from .grid import Environment, GridLayout
+
+SPHERE_GROUP = "Microfacet Lab: sphere"
+
+
+def new_scene():
+    """An empty file with Cycles and OSL on the CPU (OSL runs on CPU and OptiX only)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.shading_system = True
+    scene.cycles.device = "CPU"
+    return scene
+
+
+def configure_render(scene, layout: GridLayout, samples: int, seed: int, max_bounces: int = 4):
+    cycles = scene.cycles
+    cycles.samples = samples
+    cycles.seed = seed
+    cycles.use_animated_seed = False
+    cycles.use_adaptive_sampling = False
+    cycles.use_denoising = False
+    cycles.filter_width = 0.01
+    cycles.blur_glossy = 0.0
+    cycles.sample_clamp_direct = 0.0
+    cycles.sample_clamp_indirect = 0.0
+    cycles.caustics_reflective = True
+    cycles.caustics_refractive = True
+    cycles.max_bounces = max_bounces
+    cycles.glossy_bounces = max_bounces
+    cycles.diffuse_bounces = max_bounces
+    cycles.transmission_bounces = max_bounces
+    cycles.transparent_max_bounces = max_bounces
+    render = scene.render
+    render.resolution_x, render.resolution_y = layout.width, layout.height
+    render.resolution_percentage = 100
+    render.film_transparent = False
+    render.image_settings.file_format = "OPEN_EXR"
+    render.image_settings.color_depth = "32"
+    render.image_settings.exr_codec = "ZIP"
+    render.use_file_extension = False
+    scene.view_settings.view_transform = "Standard"
+
+
+def add_world(scene, env: Environment):
+    """L(w) = constant + gradient (w . d): Texture Coordinate > Generated is the world direction
+    in a world shader (checked against an analytic mirror sphere in the tests)."""
+    world = bpy.data.worlds.new(f"Microfacet Lab: {env.name}")
+    scene.world = world
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    dot = tree.nodes.new("ShaderNodeVectorMath")
+    dot.operation = "DOT_PRODUCT"
+    dot.inputs[1].default_value = tuple(env.unit_direction())
+    scale = tree.nodes.new("ShaderNodeMath")
+    scale.operation = "MULTIPLY_ADD"
+    scale.inputs[1].default_value = env.gradient
+    scale.inputs[2].default_value = env.constant
+    tree.links.new(coords.outputs["Generated"], dot.inputs[0])
+    tree.links.new(dot.outputs["Value"], scale.inputs[0])
+    tree.links.new(scale.outputs["Value"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = 1.0
+    return world
+
+
+def add_camera(scene, layout: GridLayout):
+    camera = bpy.data.cameras.new("Microfacet Lab camera")
+    camera.type = "ORTHO"
+    camera.ortho_scale = layout.ortho_scale
+    camera.sensor_fit = "AUTO"
+    obj = bpy.data.objects.new("Microfacet Lab camera", camera)
+    obj.location = (0.0, 0.0, 10.0)
+    scene.collection.objects.link(obj)
+    scene.camera = obj
+    return obj
+
+
+def _sphere_node_group(radius: float):
+    """Geometry nodes: one vertex -> one point-cloud point (an exact sphere in Cycles) with the
+    material given on the modifier."""
+    group = bpy.data.node_groups.get(SPHERE_GROUP)
+    if group is not None:
+        return group
+    group = bpy.data.node_groups.new(SPHERE_GROUP, "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Material", in_out="INPUT", socket_type="NodeSocketMaterial")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in = group.nodes.new("NodeGroupInput")
+    group_out = group.nodes.new("NodeGroupOutput")
+    to_points = group.nodes.new("GeometryNodeMeshToPoints")
+    to_points.inputs["Radius"].default_value = radius
+    set_material = group.nodes.new("GeometryNodeSetMaterial")
+    group.links.new(group_in.outputs["Geometry"], to_points.inputs["Mesh"])
+    group.links.new(to_points.outputs["Points"], set_material.inputs["Geometry"])
+    group.links.new(group_in.outputs["Material"], set_material.inputs["Material"])
+    group.links.new(set_material.outputs["Geometry"], group_out.inputs["Geometry"])
+    return group
+
+
+def add_spheres(scene, layout: GridLayout, materials: list):
+    """One exact sphere per material, row-major; invisible to every secondary ray so that each
+    sees only the environment."""
+    if len(materials) > layout.count:
+        raise ValueError(f"{len(materials)} materials for a grid of {layout.count} spheres")
+    group = _sphere_node_group(layout.radius)
+    socket_id = group.interface.items_tree["Material"].identifier
+    objects = []
+    for i, (material, (x, y)) in enumerate(zip(materials, layout.centers())):
+        if material is None:
+            continue
+        mesh = bpy.data.meshes.new(f"sphere {i:03d}")
+        mesh.vertices.add(1)
+        obj = bpy.data.objects.new(f"sphere {i:03d}", mesh)
+        obj.location = (float(x), float(y), 0.0)
+        modifier = obj.modifiers.new("sphere", "NODES")
+        modifier.node_group = group
+        modifier[socket_id] = material
+        for ray in ("diffuse", "glossy", "transmission", "shadow", "volume_scatter"):
+            setattr(obj, f"visible_{ray}", False)
+        scene.collection.objects.link(obj)
+        objects.append(obj)
+    return objects
+
+
+def _new_material(name: str):
+    material = bpy.data.materials.new(name)
+    tree = material.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    output = tree.nodes.new("ShaderNodeOutputMaterial")
+    output.target = "CYCLES"
+    return material, tree, output
+
+
+def model_material(model_id: str, values: dict | None = None, name: str | None = None):
+    """A material made of one Microfacet Lab node group."""
+    material, tree, output = _new_material(name or model_id)
+    node = nodes.add_group_node(tree, model_id, values)
+    tree.links.new(node.outputs["BSDF"], output.inputs["Surface"])
+    return material
+
+
+def osl_material(source: str, name: str):
+    """A material made of a raw OSL script (used for Cycles' native closures in tests)."""
+    material, tree, output = _new_material(name)
+    text = bpy.data.texts.new(name + ".osl")
+    text.write(source)
+    script = tree.nodes.new("ShaderNodeScript")
+    script.mode = "INTERNAL"
+    script.script = text
+    from cycles import osl as cycles_osl
+    cycles_osl.update_script_node(script, lambda *args: None)
+    tree.links.new(script.outputs[0], output.inputs["Surface"])
+    return material
+
+
+def uncompiled_script_nodes() -> list[str]:
+    """Every Script node (in materials and node groups) without bytecode or without sockets."""
+    trees = [(m.name, m.node_tree) for m in bpy.data.materials if m.node_tree]
+    trees += [(g.name, g) for g in bpy.data.node_groups if g.bl_idname == "ShaderNodeTree"]
+    return [f"{owner}/{node.name}" for owner, tree in trees for node in tree.nodes
+            if node.bl_idname == "ShaderNodeScript" and node.mode == "INTERNAL"
+            and (not node.bytecode or len(node.outputs) == 0)]
+
+
+def check_compiled():
+    """The guard: fail loudly rather than render a silently empty shader."""
+    bad = uncompiled_script_nodes()
+    if bad:
+        raise RuntimeError(f"Script nodes with no bytecode or no sockets: {bad}")
+
+
+def build_grid_scene(layout: GridLayout, materials: list, env: Environment,
+                     samples: int, seed: int = 0, max_bounces: int = 4):
+    """The sphere-grid scene. `materials` is a list of bpy materials (None leaves a gap) made
+    in the current file, e.g. with model_material() after new_scene()."""
+    scene = bpy.context.scene
+    configure_render(scene, layout, samples, seed, max_bounces)
+    add_world(scene, env)
+    add_camera(scene, layout)
+    add_spheres(scene, layout, materials)
+    check_compiled()
+    return scene
+
+
+def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
+    """Render to an EXR (a temporary one unless `path`), read it back as float32 (H, W, 4),
+    row 0 at the top. Returns the image and the render wall time in seconds."""
+    import OpenImageIO as oiio
+
+    tmp = None
+    if path is None:
+        tmp = tempfile.NamedTemporaryFile(suffix=".exr", delete=False)
+        tmp.close()
+        path = tmp.name
+    scene.render.filepath = path
+    start = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    seconds = time.perf_counter() - start
+    pixels = oiio.ImageBuf(path).get_pixels(oiio.FLOAT)
+    if pixels is None or pixels.size == 0:
+        raise RuntimeError(f"could not read the render back from {path}")
+    if tmp is not None:
+        os.unlink(path)
+    return np.asarray(pixels, dtype=np.float64), seconds
+
+
+def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, cols: int = 4,
+                 cell_px: int = 32, path: str | None = None, materials: list | None = None):
+    """Build and render a grid of SphereSpecs (or of ready-made `materials`, made by a callable
+    run after the scene is reset). Returns (layout, image, seconds)."""
+    count = len(specs if materials is None else materials)
+    layout = GridLayout(rows=-(-count // cols), cols=cols, cell_px=cell_px)
+    scene = new_scene()
+    if materials is None:
+        mats = [None if s is None else model_material(s.model_id, s.values, f"{i:03d} {s.label}")
+                for i, s in enumerate(specs)]
+    else:
+        mats = [None if make is None else make() for make in materials]
+    build_grid_scene(layout, mats, env, samples, seed)
+    image, seconds = render(scene, path)
+    return layout, image, seconds
