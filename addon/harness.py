@@ -38,6 +38,7 @@ def configure_render(scene, layout: GridLayout, samples: int, seed: int, max_bou
     cycles.use_animated_seed = False
     cycles.use_adaptive_sampling = False
     cycles.use_denoising = False
+    cycles.pixel_filter_type = "BLACKMAN_HARRIS"
     cycles.filter_width = 0.01
     cycles.blur_glossy = 0.0
     cycles.sample_clamp_direct = 0.0
