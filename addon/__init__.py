@@ -6,10 +6,12 @@ alone); `register()` imports the bpy-side modules.
 
 
 def register():
-    from . import ui
+    from . import preset_ui, ui
     ui.register()
+    preset_ui.register()
 
 
 def unregister():
-    from . import ui
+    from . import preset_ui, ui
+    preset_ui.unregister()
     ui.unregister()
