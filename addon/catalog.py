@@ -65,6 +65,8 @@ class Model:
     shader: str  # osl/<shader>.osl
     params: tuple[Param, ...]
     doc: str = ""
+    # Kinds of light the model scatters ("diffuse", "glossy", "transmission", "transparent"):
+    # scene specialization (addon/specialize.py) sets Cycles' bounces from them.
     tags: tuple[str, ...] = field(default=())
 
     def param(self, pid: str) -> Param:
@@ -95,10 +97,10 @@ ROUGHNESS = Param("roughness", "Roughness", FLOAT, 0.5, 0.0, 1.0,
                   doc="Cycles roughness r; alpha = r^2. 0 is a perfect mirror.")
 IOR = Param("ior", "IOR", FLOAT, 1.5, 0.01, 100.0,
             doc="Relative index of refraction eta = n_t / n_i of a dielectric. NaN -> 1.5.")
-# Gold at roughly R 650 nm, G 550 nm, B 450 nm (Johnson & Christy 1972, via refractiveindex.info).
-CONDUCTOR_N = Param("n", "N (complex IOR)", COLOR, (0.166, 0.429, 1.38), 0.001, 100.0,
+# Gold at R 650 nm, G 550 nm, B 450 nm (Johnson & Christy 1972, PRB 6, 4370; interpolated).
+CONDUCTOR_N = Param("n", "N (complex IOR)", COLOR, (0.156, 0.424, 1.38), 0.001, 100.0,
                     doc="Real part n of a conductor's complex IOR n + ik, per RGB channel.")
-CONDUCTOR_K = Param("k", "K (extinction)", COLOR, (3.15, 2.45, 1.83), 0.0, 100.0,
+CONDUCTOR_K = Param("k", "K (extinction)", COLOR, (3.602, 2.472, 1.914), 0.0, 100.0,
                     doc="Imaginary part k of a conductor's complex IOR, per RGB channel.")
 TINT = Param("base_color", "Color", COLOR, (1.0, 1.0, 1.0), 0.0, 1.0,
              doc="Multiplies the specular lobe (1 is physical).")
@@ -134,6 +136,7 @@ COOK_TORRANCE = _add(Model(
     label="Microfacet Cook-Torrance (1982)",
     year=1982,
     shader="cook_torrance",
+    tags=("diffuse", "glossy"),
     doc="f = d R_d + s R_s, s + d = 1; R_s = F D G / (4 (n.wi)(n.wo)) with Beckmann D, "
         "V-cavity G (Torrance-Sparrow) and exact Fresnel; R_d Lambertian (native diffuse()).",
     params=(
@@ -153,6 +156,7 @@ WALTER_REFLECTION = _add(Model(
     label="Microfacet Reflection (Walter 2007)",
     year=2007,
     shader="walter_reflection",
+    tags=("glossy",),
     doc="f_r = F G2 D / (4 |wi.n| |wo.n|) with GGX or Beckmann D, separable or "
         "height-correlated Smith G2, and exact Fresnel.",
     params=(

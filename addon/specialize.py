@@ -20,9 +20,8 @@
       light sampling.
     Lobe kinds are read conservatively: every node of a material's tree (and nested groups)
     counts, linked or not; a Script node that is not Microfacet Lab's, or an unknown shader
-    node, counts as every kind. Microfacet Lab groups count as the lobes of their model
-    (`MODEL_LOBES`, or the catalog model's tags when they name lobe kinds; an unknown model
-    counts as every kind);
+    node, counts as every kind. Microfacet Lab groups count as the lobes their catalog model's
+    tags name (a model without lobe tags, or an unknown model, counts as every kind);
 (c) checks that the model switches (enum inputs) of every Microfacet Lab group node are
     unlinked constants, which the OSL compiler folds away; linked ones are reported.
 
@@ -41,13 +40,6 @@ DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT = (
     "diffuse", "glossy", "transmission", "volume", "transparent")
 ALL = frozenset((DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT))
 LOBE_KINDS = (DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT)
-
-# Closures each model's OSL returns (osl/<model>.osl). Models added later either appear here or
-# carry lobe kinds in their catalog tags; otherwise they count as every kind.
-MODEL_LOBES = {
-    "cook_torrance": frozenset((DIFFUSE, GLOSSY)),  # diffuse() + reflection()
-    "walter_reflection": frozenset((GLOSSY,)),  # reflection()
-}
 
 # Cycles shader nodes by bl_idname -> lobe kinds (Blender 4.2 to 5.x names).
 NATIVE_LOBES = {
@@ -142,8 +134,8 @@ def group_model(tree):
 def model_lobes(model) -> frozenset:
     if model is None:
         return ALL
-    tagged = frozenset(t for t in getattr(model, "tags", ()) if t in ALL)
-    return tagged or MODEL_LOBES.get(model.id, ALL)
+    tagged = frozenset(t for t in model.tags if t in ALL)
+    return tagged or ALL
 
 
 def scene_materials(scene) -> list:
