@@ -30,7 +30,9 @@ _SLOPE_BOUND = 6.0
 
 
 def dot(a, b):
-    return np.sum(np.asarray(a) * np.asarray(b), axis=-1)
+    """Dot product over the last axis, broadcasting the others."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    return np.einsum("...i,...i->...", a, b)
 
 
 def normalize(v):
