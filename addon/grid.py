@@ -107,6 +107,14 @@ class GridLayout:
         return index, normal, np.where(inside, nz, 0.0)
 
 
+def background_mask(layout: GridLayout, margin_px: float = 1.0) -> np.ndarray:
+    """Pixels whose centre is more than `margin_px` pixels away from every sphere."""
+    xy = layout.pixel_world_xy()
+    scale = layout.ortho_scale / max(layout.width, layout.height)
+    d = np.linalg.norm(xy[:, :, None, :] - layout.centers()[None, None], axis=-1).min(-1)
+    return d > layout.radius + margin_px * scale
+
+
 def tangent_toward_view(normal: np.ndarray) -> np.ndarray:
     """Unit tangent t with wi = mu n + sqrt(1 - mu^2) t (zero at mu = 1, where Vt = 0)."""
     mu = normal[..., 2:3]
@@ -148,6 +156,10 @@ class BandStats:
 
 
 MU_BANDS = ((0.05, 0.35), (0.35, 0.75), (0.75, 1.0001))
+# Absolute accuracy of a reference pixel: quadrature order N vs 2N and the interpolation of the
+# moment tables each agree to 1e-4 (tests/test_reference_quadrature.py). A rendered mean can
+# only be held to the reference within this, however small its noise.
+REFERENCE_ACCURACY = 1e-4
 
 
 def band_stats(layout: GridLayout, render: np.ndarray, reference: np.ndarray,
@@ -204,6 +216,11 @@ def reference_grid_image(layout: GridLayout, specs: list, env: Environment) -> n
     from .reference.quadrature import moments_at
 
     return reference_image(layout, reference_tables(specs), env, moments_at)
+
+
+def inconsistent(stats: BandStats, z_crit: float) -> bool:
+    """True when a band's bias is not explained by its noise and the reference's accuracy."""
+    return bool((np.abs(stats.bias) > z_crit * stats.stderr + REFERENCE_ACCURACY).any())
 
 
 def sidak_z(tests: int, family_alpha: float = 1e-3) -> float:

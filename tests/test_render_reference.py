@@ -8,7 +8,8 @@ samplers the shaders use.
 Statistics: each pixel has its own random stream, so the noise of a mean over pixels is the
 scatter of the per-pixel residuals over sqrt(n); a second seed checks that this noise estimate is
 calibrated. A bias is flagged when it exceeds a Sidak-corrected z threshold (family-wise error
-1e-3 over all comparisons of a test). The power check asserts that the noise is small enough to
+1e-3 over all comparisons of a test) times its noise, plus the reference's own accuracy (1e-4,
+grid.REFERENCE_ACCURACY), which is what limits the near-mirror spheres. The power check asserts that the noise is small enough to
 see a 1% bias; the 1% criterion is then tested directly on each sphere.
 What this catches: a wrong weight, pdf or Jacobian in any sampler, a wrong G2 form, a wrong
 Fresnel, the hash stream being correlated with the sample, the roughness mapping, or a harness
@@ -46,11 +47,14 @@ SPECS = [SphereSpec(model, {**values, "roughness": r},
          for model, values in ROWS for r in ROUGHNESS]
 
 
+CELL_PX = 40  # about 1000 pixels per sphere
+
+
 @pytest.fixture(scope="module", params=["white", "gradient"])
 def converged(request):
     env = grid.ENVIRONMENTS[request.param]
-    layout, image, seconds = harness.render_specs(SPECS, env, SAMPLES, seed=1)
-    _, image2, _ = harness.render_specs(SPECS, env, SAMPLES, seed=2)
+    layout, image, seconds = harness.render_specs(SPECS, env, SAMPLES, seed=1, cell_px=CELL_PX)
+    _, image2, _ = harness.render_specs(SPECS, env, SAMPLES, seed=2, cell_px=CELL_PX)
     reference = grid.reference_grid_image(layout, SPECS, env)
     return env, layout, image, image2, reference, seconds
 
@@ -58,8 +62,7 @@ def converged(request):
 def test_no_nan_and_background_is_environment(converged):
     env, layout, image, _, reference, _ = converged
     assert np.isfinite(image).all()
-    index, _, _ = layout.pixel_geometry()
-    background = image[index < 0][:, :3]
+    background = image[grid.background_mask(layout)][:, :3]
     # Background pixels see L(-z) directly (catches a wrong world set-up).
     assert np.allclose(background, env.radiance(-grid.VIEW), atol=1e-5)
 
@@ -70,16 +73,18 @@ def test_every_model_and_sampler_converges_to_reference(converged):
     z_crit = grid.sidak_z(3 * len(bands))
     failures = []
     for b in bands:
-        z = np.abs(b.bias) / np.maximum(b.stderr, 1e-7)
-        if (z > z_crit).any():
+        z = np.abs(b.bias) / np.maximum(b.stderr, 1e-9)
+        if grid.inconsistent(b, z_crit):
             failures.append(f"{SPECS[b.sphere].label} mu in {b.band}: bias {b.bias} "
                             f"stderr {b.stderr} ref {b.reference} z {z.max():.1f}")
     assert not failures, f"z_crit {z_crit:.2f} ({env.name}):\n" + "\n".join(failures)
 
 
 def test_every_sphere_within_one_percent(converged):
-    env, layout, image, _, reference, _ = converged
-    spheres = grid.band_stats(layout, image, reference, bands=((0.05, 1.0001),))
+    """Both seeds pooled (2 x SAMPLES per pixel) so that a 1% bias stands out of the noise."""
+    env, layout, image, image2, reference, _ = converged
+    pooled = 0.5 * (image + image2)
+    spheres = grid.band_stats(layout, pooled, reference, bands=((0.05, 1.0001),))
     z_crit = grid.sidak_z(3 * len(spheres))
     weak, biased = [], []
     for s in spheres:
