@@ -59,14 +59,20 @@ def direction(theta_deg, phi=0.7):
     return np.array([math.sin(t) * math.cos(phi), math.sin(t) * math.sin(phi), math.cos(t)])
 
 
+def nodes(ax, ay):
+    """Gauss-Legendre nodes per panel: elongated (anisotropic) lobes vary faster in phi."""
+    return 32 if ax == ay else 96
+
+
 CASES = [(d, a, a) for d in DISTRIBUTIONS for a in ALPHAS] + \
-        [(d, 0.05, 0.4) for d in DISTRIBUTIONS] + [(d, 0.8, 0.1) for d in DISTRIBUTIONS]
+        [("ggx", 0.05, 0.4), ("beckmann", 0.8, 0.1)]  # anisotropic
 
 
 @pytest.mark.parametrize("dist, ax, ay", CASES)
 def test_normalisation_dcos(dist, ax, ay):
     mf = Microfacet(dist, ax, ay)
-    total = integrate_normals(mf.pdf_dcos, np.array([0.0, 0.0, 1.0]), math.sqrt(ax * ay))
+    total = integrate_normals(mf.pdf_dcos, np.array([0.0, 0.0, 1.0]), math.sqrt(ax * ay),
+                              nodes(ax, ay))
     assert total == pytest.approx(1.0, abs=1e-4)
 
 
@@ -77,8 +83,8 @@ def test_normalisation_visible_normals(dist, ax, ay):
     for theta in INCIDENCE:
         wi = direction(theta)
         c = math.sqrt(ax * ay)
-        smith = integrate_normals(lambda m: mf.pdf_vndf(wi, m), wi, c)
-        vcav = integrate_normals(lambda m: mf.pdf_vcavity(wi, m), wi, c)
+        smith = integrate_normals(lambda m: mf.pdf_vndf(wi, m), wi, c, nodes(ax, ay))
+        vcav = integrate_normals(lambda m: mf.pdf_vcavity(wi, m), wi, c, nodes(ax, ay))
         assert smith == pytest.approx(1.0, abs=1e-4), (theta, smith)
         assert vcav == pytest.approx(1.0, abs=1e-4), (theta, vcav)
 

@@ -25,7 +25,7 @@ SQRT_PI = math.sqrt(math.pi)
 _TINY = 1e-30
 # Beckmann visible-slope inversion: fixed number of safeguarded Newton-bisection steps (the
 # OSL twin needs a fixed loop), slopes bounded by 6 (mass outside < 1e-16).
-BECKMANN_NEWTON_STEPS = 6
+BECKMANN_NEWTON_STEPS = 5
 _SLOPE_BOUND = 6.0
 
 
@@ -266,7 +266,7 @@ def _beckmann_visible_slope_x(u, tan_t, cot_t, steps: int = BECKMANN_NEWTON_STEP
     dC/db = (1 - x tan t) / (2 (1 + Lambda)) is bounded: safeguarded Newton-bisection, a fixed
     number of steps, from Jakob's fitted initial guess b0 = c - (1 + c)(1 - u)^p(theta),
     c = erf(cot t). Inside the loop x = erfinv_giles(b) (as the OSL twin); the result is
-    x = erfinv(b). Accuracy: 6 steps reach |dx| < 1e-9 at every incidence (tested)."""
+    x = erfinv(b). Accuracy: 5 steps reach |dx| < 1e-9 at every incidence (measured against 60 steps)."""
     theta = np.arctan(tan_t)
     cot_c = np.minimum(cot_t, _SLOPE_BOUND)  # mass beyond 6 is below 1e-16
     hi = erf(cot_c) + np.zeros(np.shape(u))
