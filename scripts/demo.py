@@ -70,23 +70,37 @@ def to_display(image):
 
 
 def save_gallery(path, specs, panels):
+    """Renders under each environment, then render minus reference for the last one."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 6.8), dpi=110)
-    for ax, (env_key, (layout, image, reference, seconds)) in zip(np.atleast_1d(axes), panels.items()):
+    n = len(panels) + 1
+    fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 1.5, 5.4), dpi=110)
+    for ax, (env_key, (layout, image, reference, seconds)) in zip(axes, panels.items()):
         ax.imshow(to_display(image), interpolation="nearest")
         ax.set_title(f"{grid.ENVIRONMENTS[env_key].name} ({seconds:.0f} s render)")
-        ax.set_xticks([(c + 0.5) * layout.cell_px for c in range(layout.cols)])
-        ax.set_xticklabels([f"r = {r}" for r in ROUGHNESS])
-        ax.set_yticks([(r + 0.5) * layout.cell_px for r in range(layout.rows)])
-        ax.set_yticklabels([label for label, _, _ in ROWS])
+        _label_axes(ax, layout, ylabels=ax is axes[0])
+    layout, image, reference, _ = panels[env_key]
+    diff = (image[..., :3] - reference).mean(-1)
+    diff[~(layout.pixel_geometry()[0] >= 0)] = 0.0
+    limit = 0.05
+    im = axes[-1].imshow(diff, cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest")
+    axes[-1].set_title(f"render - numpy reference ({grid.ENVIRONMENTS[env_key].name})")
+    _label_axes(axes[-1], layout, ylabels=False)
+    fig.colorbar(im, ax=axes[-1], fraction=0.046, pad=0.04, label="per-pixel noise, mean ~ 0")
     fig.suptitle("Microfacet Lab: OSL shaders in Cycles (Roughness as in Cycles, alpha = r^2)")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def _label_axes(ax, layout, ylabels):
+    ax.set_xticks([(c + 0.5) * layout.cell_px for c in range(layout.cols)])
+    ax.set_xticklabels([f"r = {r}" for r in ROUGHNESS])
+    ax.set_yticks([(r + 0.5) * layout.cell_px for r in range(layout.rows)])
+    ax.set_yticklabels([label for label, _, _ in ROWS] if ylabels else [])
 
 
 if __name__ == "__main__":
