@@ -1,0 +1,416 @@
+"""Lee, Jarabo, Jeon, Gutierrez, Kim 2018 "Practical multiple scattering for rough surfaces":
+the kaleidoscopic closed form of multiple mirror reflection in V-grooves (numpy reference).
+
+Derivation (own geometry, no code of the authors) in docs/lee-asymmetric-grooves.md; ground
+truth: addon/reference/vgroove.py (brute-force tracing). Conventions: MODELS.md (n = (0,0,1),
+wi toward the viewer, wo away from the surface, vectors (..., 3)).
+
+2D angles. A groove is seen in its cross-section (the plane of t and n, t horizontal _|_ the
+groove axis u = n x t). A direction w with w.z > 0 has the 2D angle theta = atan2(w.t, w.z)
+(positive toward +t) and the 2D length rho = sqrt(1 - (w.u)^2). The groove's left wall has
+normal s_l = sin(theta_l) t + cos(theta_l) n (leans toward +t: it faces rays coming from +t),
+the right wall -sin(theta_r) t + cos(theta_r) n; opening angle theta_v = pi - theta_l - theta_r
+(symmetric: theta_l = theta_r = theta_s, theta_v = pi - 2 theta_s). Formulas below are for
+rays whose first bounce is on the LEFT wall; the others are the mirror image (t -> -t:
+theta_i -> -theta_i, theta_l <-> theta_r, theta_o -> -theta_o).
+
+Kaleidoscope (apex at the origin, polar angle psi counter-clockwise from n). Unfold the groove
+by reflecting it across its walls: wedges of angle theta_v around the apex; the ray becomes a
+straight line, each crossing of a wedge boundary is one bounce, and it leaves when it crosses
+the outer chord of a wedge. Let e = (-cos theta_i, sin theta_i) (the beam's transverse axis)
+and l = e.P the offset of the ray line (any point P of it): over the opening the rays'
+offsets are uniform on [f_B, f_A], f_A = L_l cos(theta_i - theta_l) (left rim),
+f_B = -L_r cos(theta_i + theta_r) (right rim), L_l, L_r the wall lengths; l > 0 means the left
+wall is hit first (the fraction f_A / (f_A - f_B), clamped: the V-cavity visible-normal
+rule). The polygon vertices (wall ends) are V_m at psi = pi/2 - theta_l + m theta_v, radius L_l
+(m even) or L_r (m odd), with offsets f(V_m) = R_m sin(phi0 + m theta_v),
+phi0 = theta_i + pi/2 - theta_l. The line enters through the chord [V_-1, V_0] and leaves
+through the first chord [V_(k-1), V_k] with f(V_k) < l (the polygon is convex), so
+
+    k = #{m >= 0 : R_m sin(phi0 + m theta_v) >= l}     (bounce count)
+
+Symmetric (R_m = 1, l in [0, 1]): k = floor((pi - asin(l) - phi0) / theta_v) + 1; its maximum
+over the beam (l -> 0, the ray through the apex) is floor((pi - theta_i) / theta_v + 1/2), and
+the beam splits into exactly two counts, k-1 and k (the seed's eq. 5-1 up to its angle
+convention, see the doc). Exit angle (the unfolding maps wedge k back onto the groove: a
+rotation by -k theta_v for even k, a reflection for odd k):
+
+    k even: theta_o = theta_i + k theta_v - pi
+    k odd:  theta_o = 2 theta_l - theta_i - (k - 1) theta_v   (symmetric: pi - theta_i - k theta_v)
+
+i.e. theta_o = (-1)^k (theta_i + k theta_v - pi) for symmetric grooves. The seed's eq. 5-2,
+theta_o = (-1)^k (theta_i + pi - k theta_v), is this formula in the opposite angle convention
+(theta -> -theta, i.e. angles positive toward the first-hit wall's side); both of its cases
+are the same formula with k-1 and k: the case "k-1 reflections" uses (-1)^(k-1) with k-1 and
+the case "k reflections" uses (-1)^k with k, correctly paired once the bounce count is the
+count of the case (tested against the tracer). Bounce j (1-based) meets its wall at the 2D
+cosine |sin(phi0 + (j-1) theta_v)|, the 3D cosine is rho times it (the Fresnel argument).
+wo = rho (sin theta_o t + cos theta_o n) - (wi.u) u.
+
+BRDF (symmetric; seed eq. 5-7, MODELS.md):
+    f(wi, wo) = sum over first walls s and k of
+        D(s) |wi.s| G_k prod_j F_j |ds/dwo| / (|wi.n| |wo.n|),
+    G_k = (length of the offsets in [max(f_B, 0), f_A] giving k bounces) / f_A,
+    |ds/dwo| = sin(theta_s) / (2 k |(wi + wo).t|)
+(for odd k, (wi + wo).t = 2 (wi.h) sin(theta_h) and this is the seed's
+sin(theta_s) / (4 k |wi.h| sin(theta_h))). Given (wi, wo), the groove azimuth is that of
+h = wi + wo (every bounce map wi -> wo is a rotation by pi or a rotation about u composed with
+-1, so u _|_ wi + wo) up to its sign, and theta_s follows from theta_o(k) above.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .microfacet import Microfacet
+from .special import erfc
+from .vgroove import SizeBiasedTable, fresnel_fn, groove_frame
+
+PI = math.pi
+TRUNCATION = 1e-4  # energy allowed in paths beyond max_bounces
+
+
+# -- bounce count bound ------------------------------------------------------------------------
+def _tail_dcos(distribution: str, alpha: float, T: float) -> float:
+    """P(tan theta_m > T) for m ~ D(m)(m.n)."""
+    x = (T / alpha) ** 2
+    return 1.0 / (1.0 + x) if distribution == "ggx" else math.exp(-x)
+
+
+def _tail_sizebiased(distribution: str, alpha: float, T: float) -> float:
+    """P(tan theta > T) for the partner wall of asymmetric grooves (density ~ D sin^2 theta):
+    GGX: tan theta = alpha tan b, b with density (4/pi) sin^2 b on [0, pi/2];
+    Beckmann: tan^2 theta = alpha^2 G, G ~ Gamma(3/2), P(G > g) = erfc(sqrt g) + 2 sqrt(g/pi) e^-g."""
+    if distribution == "ggx":
+        b = math.atan(T / alpha)
+        return (PI / 4.0 - b / 2.0 + math.sin(2.0 * b) / 4.0) / (PI / 4.0)
+    g = (T / alpha) ** 2
+    return float(erfc(math.sqrt(g))) + 2.0 * math.sqrt(g / PI) * math.exp(-g)
+
+
+def max_bounces(alpha: float, distribution: str = "ggx", groove: str = "symmetric",
+                eps: float = TRUNCATION, limit: int = 100000) -> int:
+    """Smallest N such that paths with more than N bounces carry less than eps of the energy,
+    for every incidence (F <= 1, so energy <= probability).
+
+    Symmetric: a ray whose first wall is s makes k <= floor((pi - theta_i)/theta_v + 1/2)
+    bounces with theta_i > theta_s - pi/2 (s visible), so k < pi / (2 x) + 1, x = pi/2 - theta_s;
+    k > N needs theta_s > pi/2 - pi/(2N). Grooves are met in proportion to D(s)(s.n) whatever
+    wi, so P(k > N) <= P(tan theta_s > cot(pi / (2N))) = 1 / (1 + T^2/alpha^2) (GGX) or
+    exp(-T^2/alpha^2) (Beckmann), T = cot(pi/(2N)).
+    Asymmetric: k <= floor(pi / theta_v) + 1 (phi0 > 0), so k > N needs theta_v < pi / N,
+    i.e. theta_l + theta_r > pi - pi/N: BOTH walls steeper than pi/2 - pi/N. The drawn wall and
+    its size-biased partner are independent, so P(k > N) <= P_D(tan > T) P_partner(tan > T),
+    T = cot(pi / N).
+    alpha is the largest of alpha_x, alpha_y (conservative)."""
+    alpha = max(float(alpha), 1e-7)
+    for N in range(1, limit + 1):
+        if groove == "asymmetric":
+            T = 1.0 / math.tan(PI / N) if N > 2 else 0.0
+            p = _tail_dcos(distribution, alpha, T) * _tail_sizebiased(distribution, alpha, T)
+        else:
+            T = 1.0 / math.tan(PI / (2.0 * N))
+            p = _tail_dcos(distribution, alpha, T)
+        if p < eps:
+            return N
+    return limit
+
+
+# -- 2D kernels --------------------------------------------------------------------------------
+def bounce_count_symmetric(theta_i, theta_v, ell):
+    """k for a left-first ray of offset ell in [0, 1] (unit walls); float array (may be huge)."""
+    phi0 = theta_i + 0.5 * theta_v
+    x = (PI - np.arcsin(np.clip(ell, 0.0, 1.0)) - phi0) / theta_v
+    return np.maximum(np.floor(x), 0.0) + 1.0
+
+
+def bounce_count(theta_i, theta_l, theta_r, ell, L_l, L_r):
+    """k = #{m >= 0 : R_m sin(phi0 + m theta_v) >= ell} for a left-first ray (ell > 0), closed
+    form: even m count the phases in [.., pi - asin(ell/L_l)], odd m the phases in
+    [asin(ell/L_r), pi - asin(ell/L_r)] (float array)."""
+    tv = PI - theta_l - theta_r
+    phi0 = theta_i + 0.5 * PI - theta_l
+    hi_l = PI - np.arcsin(np.clip(ell / L_l, 0.0, 1.0))
+    n_even = np.maximum(np.floor((hi_l - phi0) / (2.0 * tv)), -1.0) + 1.0
+    rr = ell / L_r
+    lo_r = np.arcsin(np.clip(rr, 0.0, 1.0))
+    j_lo = np.maximum(np.ceil((lo_r - phi0 - tv) / (2.0 * tv)), 0.0)
+    j_hi = np.floor((PI - lo_r - phi0 - tv) / (2.0 * tv))
+    n_odd = np.where(rr < 1.0, np.maximum(j_hi - j_lo + 1.0, 0.0), 0.0)
+    return n_even + n_odd
+
+
+def exit_angle(theta_i, theta_l, theta_r, k):
+    """2D exit angle after k bounces (left-first ray): even k theta_i + k tv - pi, odd k
+    2 theta_l - theta_i - (k-1) tv."""
+    tv = PI - theta_l - theta_r
+    return np.where(np.mod(k, 2.0) == 0.0, theta_i + k * tv - PI,
+                    2.0 * theta_l - theta_i - (k - 1.0) * tv)
+
+
+def fresnel_product(fresnel, rho, phi0, theta_v, k, kmax: int):
+    """prod_{j=1..k} F(rho |sin(phi0 + (j-1) theta_v)|), RGB, for k <= kmax (loop of kmax)."""
+    out = np.ones(np.shape(k) + (3,))
+    for j in range(1, kmax + 1):
+        on = k >= j
+        if not np.any(on):
+            break
+        c = rho[on] * np.abs(np.sin(phi0[on] + (j - 1) * theta_v[on]))
+        out[on] *= fresnel(np.minimum(c, 1.0))
+    return out
+
+
+def _vec(t, n3, u, rho, theta, wu):
+    return (rho * np.sin(theta))[..., None] * t + (rho * np.cos(theta))[..., None] * n3 \
+        - wu[..., None] * u
+
+
+def _local(wi, t, u):
+    wi = np.broadcast_to(np.asarray(wi, dtype=float), np.shape(t))
+    px = np.sum(wi * t, axis=-1)
+    wu = np.sum(wi * u, axis=-1)
+    pz = wi[..., 2]
+    return np.arctan2(px, pz), np.hypot(px, pz), wu
+
+
+# -- size-biased partner wall (asymmetric grooves) -----------------------------------------------
+def sample_partner(distribution: str, alpha, u1, u2, u3):
+    """Partner-wall angle theta_r of an asymmetric groove, density ~ D(theta) sin^2(theta)
+    (the slope radius size-biased; docs/lee-asymmetric-grooves.md), closed form from three
+    uniforms: with E = -ln u1, c = cos(2 pi u3), s = sin(2 pi u3), L = -ln u2 (a Gamma(1), and
+    L c^2, L s^2 two Gamma(1/2) by Box-Muller):
+      Beckmann: tan^2 theta = alpha^2 (E + L c^2)              (Gamma(3/2))
+      GGX:      tan^2 theta = alpha^2 (E + L c^2) / (L s^2)    (beta-prime(3/2, 1/2))."""
+    E = -np.log(np.maximum(u1, 1e-300))
+    L = -np.log(np.maximum(u2, 1e-300))
+    c = np.cos(2.0 * PI * u3)
+    num = alpha * np.sqrt(E + L * c * c)
+    if distribution == "ggx":
+        s = np.sin(2.0 * PI * u3)
+        return np.arctan2(num, np.sqrt(L) * np.abs(s))
+    return np.arctan(num)
+
+
+# -- the sampler -----------------------------------------------------------------------------------
+def sample(wi, u, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax: int | None = None):
+    """Analytic sampler: (wo, weight RGB, k). u: uniforms (..., 3) symmetric, (..., 6) asymmetric.
+
+    u0, u1: the drawn wall s ~ D(s)(s.n) (the groove; its frame has s on the left); [u3, u4, u5:
+    the partner wall's angle, asymmetric]; u2: the offset l = f_B + u2 (f_A - f_B) (uniform
+    entry point on the opening; l < 0 means the right wall first: mirror). Then k, theta_o in
+    closed form; weight = prod of the k Fresnel terms (exactly 1 with F = 1). The exit
+    direction is exact for every k; the Fresnel loop stops at kmax (default
+    max_bounces(alpha)): the rarer paths with k > kmax (energy < 1e-4) carry the product of
+    their first kmax Fresnel terms, so the furnace stays exactly 1."""
+    fresnel = fresnel or fresnel_fn("none")
+    wi = np.asarray(wi, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if kmax is None:
+        kmax = max_bounces(max(mf.alpha_x, mf.alpha_y), mf.distribution, groove)
+    s = mf.sample_dcos(u[..., 0], u[..., 1])
+    t, ax = groove_frame(s)
+    sh = np.hypot(s[..., 0], s[..., 1])
+    theta_l = np.arctan2(sh, s[..., 2])
+    if groove == "symmetric":
+        theta_r = theta_l
+        tv = 2.0 * np.arctan2(s[..., 2], sh)  # pi - 2 theta_s without cancellation
+    else:
+        theta_r = sample_partner(mf.distribution, mf.alpha_x, u[..., 3], u[..., 4], u[..., 5])
+        tv = PI - theta_l - theta_r
+    theta_i, rho, wu = _local(wi, t, ax)
+    L_l, L_r = np.sin(theta_r), np.sin(theta_l)   # wall lengths (depth sin_l sin_r); symmetric: equal
+    if groove == "symmetric":
+        L_l = L_r = np.ones_like(theta_l)
+    fA = L_l * np.cos(theta_i - theta_l)
+    fB = -L_r * np.cos(theta_i + theta_r)
+    ell = fB + u[..., 2] * (fA - fB)
+    right = ell < 0.0
+    sg = np.where(right, -1.0, 1.0)
+    ti = sg * theta_i
+    tl = np.where(right, theta_r, theta_l)
+    tr = np.where(right, theta_l, theta_r)
+    Ll = np.where(right, L_r, L_l)
+    Lr = np.where(right, L_l, L_r)
+    ell = np.abs(ell)
+    if groove == "symmetric":
+        k = bounce_count_symmetric(ti, tv, ell)
+    else:
+        k = bounce_count(ti, tl, tr, ell, Ll, Lr)
+    k = np.minimum(k, 2.0 ** 52)  # exact integers; huge only when theta_v underflows
+    theta_o = sg * exit_angle(ti, tl, tr, k)
+    theta_o = np.clip(theta_o, -0.5 * PI, 0.5 * PI)
+    n3 = np.zeros_like(t)
+    n3[..., 2] = 1.0
+    wo = _vec(t, n3, ax, rho, theta_o, wu)
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    phi0 = ti + 0.5 * PI - tl
+    w = fresnel_product(fresnel, rho, phi0, tv, np.minimum(k, kmax), kmax)
+    return wo, w, k.astype(np.int64)
+
+
+def sample_albedo(wi, mf, n, rng, fresnel=None, groove="symmetric", chunk=1 << 20, kmax=None):
+    """Albedo by the analytic sampler: (mean RGB, stderr RGB)."""
+    s1, s2, done = np.zeros(3), np.zeros(3), 0
+    nu = 3 if groove == "symmetric" else 6
+    while done < n:
+        m = min(chunk, n - done)
+        _, w, _ = sample(wi, rng.random((m, nu)), mf, fresnel, groove, kmax)
+        s1 += w.sum(axis=0)
+        s2 += (w * w).sum(axis=0)
+        done += m
+    mean = s1 / n
+    return mean, np.sqrt(np.maximum(s2 / n - mean * mean, 0.0) / n)
+
+
+# -- G_k and the deterministic albedo ------------------------------------------------------------
+def G_k_symmetric(theta_i, theta_s, k):
+    """Fraction of wall s's projected width (toward wi, 2D) whose rays make exactly k bounces
+    (seed eq. 5-3, both cases over f_A): offsets l in [max(f_B, 0), f_A] with
+    k(l) = k <=> asin(l) in (pi - phi0 - k tv, pi - phi0 - (k-1) tv]."""
+    tv = PI - 2.0 * theta_s
+    fA = np.cos(theta_i - theta_s)
+    fb = np.maximum(-np.cos(theta_i + theta_s), 0.0)
+    phi0 = theta_i + 0.5 * tv
+    lo = np.sin(np.clip(PI - phi0 - k * tv, 0.0, 0.5 * PI))
+    hi = np.sin(np.clip(PI - phi0 - (k - 1.0) * tv, 0.0, 0.5 * PI))
+    length = np.maximum(np.minimum(fA, hi) - np.maximum(fb, lo), 0.0)
+    return np.where(fA > 0.0, length / np.where(fA > 0.0, fA, 1.0), 0.0)
+
+
+def _pieces(ti, tl, tr, ell_lo, ell_hi, Ll, Lr, kmax):
+    """Split the left-first offsets (ell_lo, ell_hi] into runs of equal bounce count, from the
+    DEFINITION k(l) = first m with f(V_m) < l (not from the counting formula used by the
+    sampler): k(l) >= j + 1 <=> l <= min_{m <= j} f(V_m). Returns [(k, length)] for
+    k = 1..kmax+1 (the last entry collects every k > kmax)."""
+    tv = PI - tl - tr
+    phi0 = ti + 0.5 * PI - tl
+    out = []
+    run_min = np.full(np.shape(ti), np.inf)
+    prev = np.maximum(ell_hi - ell_lo, 0.0)  # length with k >= 1
+    for j in range(1, kmax + 2):
+        R = Ll if j % 2 == 0 else Lr
+        run_min = np.minimum(run_min, R * np.sin(phi0 + j * tv))
+        cur = np.minimum(np.clip(np.minimum(run_min, ell_hi) - ell_lo, 0.0, None), prev)
+        out.append((j, prev - cur))  # length with k == j
+        prev = cur
+        if not np.any(prev > 0.0):
+            break
+    if out[-1][0] == kmax + 1:
+        out[-1] = (kmax + 1, out[-1][1] + prev)
+    return out
+
+
+def albedo(wi, mf: Microfacet, fresnel=None, groove: str = "symmetric", n: int = 512,
+           kmax: int | None = None, n_partner: int = 96):
+    """Closed-form directional albedo (RGB) by deterministic quadrature over the grooves:
+    E_s[ sum over first walls and k of (beam fraction with k bounces) prod F ], with s on a
+    midpoint grid of the inverse CDF of D(s)(s.n) (u1: n nodes, u2: n/2 nodes on [0, 1/2],
+    doubled by the symmetry y -> -y: wi must lie in the xz plane, isotropic D), and for
+    asymmetric grooves the partner angle on a Gauss-Legendre rule (n_partner nodes) in
+    theta_r. The beam fractions are the closed-form lengths of offset intervals; nothing is
+    sampled. Paths beyond kmax carry their first kmax Fresnel terms (as the sampler)."""
+    fresnel = fresnel or fresnel_fn("none")
+    wi = np.asarray(wi, dtype=float)
+    if kmax is None:
+        kmax = max_bounces(max(mf.alpha_x, mf.alpha_y), mf.distribution, groove)
+    u1 = (np.arange(n) + 0.5) / n
+    u2 = (np.arange(n // 2) + 0.5) / n
+    U1, U2 = np.meshgrid(u1, u2, indexing="ij")
+    s = mf.sample_dcos(U1.ravel(), U2.ravel())
+    t, ax = groove_frame(s)
+    theta_l = np.arctan2(np.hypot(s[:, 0], s[:, 1]), s[:, 2])
+    theta_i, rho, _ = _local(wi, t, ax)
+    if groove == "symmetric":
+        parts = [(theta_l, 1.0)]
+    else:
+        table = SizeBiasedTable(mf)
+        th = table.sample((np.arange(n_partner) + 0.5) / n_partner)
+        dens = np.full(n_partner, 1.0 / n_partner)
+        parts = [(th[i], dens[i]) for i in range(n_partner)]
+    total = np.zeros(3)
+    for theta_r_, wgt in parts:
+        theta_r = np.broadcast_to(theta_r_, theta_l.shape)
+        if groove == "symmetric":
+            Ll = Lr = np.ones_like(theta_l)
+        else:
+            Ll, Lr = np.sin(theta_r), np.sin(theta_l)
+        fA = Ll * np.cos(theta_i - theta_l)
+        fB = -Lr * np.cos(theta_i + theta_r)
+        width = fA - fB
+        acc = np.zeros(theta_l.shape + (3,))
+        for sg in (1.0, -1.0):  # left-first part, then the mirrored right-first part
+            if sg > 0:
+                ti, tl, tr, Ll_, Lr_, hi_, lo_ = theta_i, theta_l, theta_r, Ll, Lr, fA, fB
+            else:
+                ti, tl, tr, Ll_, Lr_, hi_, lo_ = -theta_i, theta_r, theta_l, Lr, Ll, -fB, -fA
+            lo_ = np.maximum(lo_, 0.0)
+            hi_ = np.maximum(hi_, lo_)
+            tv = PI - tl - tr
+            phi0 = ti + 0.5 * PI - tl
+            for k, length in _pieces(ti, tl, tr, lo_, hi_, Ll_, Lr_, kmax):
+                if not np.any(length > 0):
+                    continue
+                on = length > 0
+                kk = min(k, kmax)  # k = kmax + 1 collects k > kmax: Fresnel loop stops at kmax
+                F = fresnel_product(fresnel, rho[on], phi0[on], tv[on] * np.ones(on.sum()),
+                                    np.full(on.sum(), float(kk)), kk)
+                acc[on] += (length[on] / width[on])[:, None] * F
+        total += wgt * acc.mean(axis=0)
+    return total
+
+
+# -- evaluation (symmetric) ------------------------------------------------------------------------
+def eval(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None):
+    """Symmetric-groove BRDF f(wi, wo) (RGB, without the cosine), summed over k = 1..kmax and
+    both walls (seed eq. 5-7). For each sign of t = +-horizontal(wi + wo) and each k, the one
+    candidate groove angle: theta_v = (theta_o - theta_i + pi - 2 pi j)/k (k even) or
+    (pi - theta_i - theta_o + 2 pi j)/k (k odd), j chosen so that k theta_v lies in the window
+    (-theta_i, 3 pi/2 - theta_i) where G_k can be non-zero (at most one j)."""
+    fresnel = fresnel or fresnel_fn("none")
+    wi = np.asarray(wi, dtype=float)
+    wo = np.asarray(wo, dtype=float)
+    shape = np.broadcast_shapes(wi.shape, wo.shape)
+    wi = np.broadcast_to(wi, shape).reshape(-1, 3)
+    wo = np.broadcast_to(wo, shape).reshape(-1, 3)
+    if kmax is None:
+        kmax = max_bounces(max(mf.alpha_x, mf.alpha_y), mf.distribution)
+    h = wi + wo
+    t0, _ = groove_frame(h)
+    out = np.zeros(wi.shape[:-1] + (3,))
+    valid = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    hh = np.hypot(h[:, 0], h[:, 1])
+    n3 = np.zeros_like(wi)
+    n3[:, 2] = 1.0
+    for sg in (1.0, -1.0):
+        t = sg * t0
+        theta_i = np.arctan2(np.sum(wi * t, -1), wi[:, 2])
+        theta_o = np.arctan2(np.sum(wo * t, -1), wo[:, 2])
+        rho = np.hypot(np.sum(wi * t, -1), wi[:, 2])
+        c = 0.75 * PI - theta_i
+        for k in range(1, kmax + 1):
+            if k % 2 == 0:
+                X = theta_o - theta_i + PI
+                j = np.round((X - c) / (2.0 * PI))
+                ktv = X - 2.0 * PI * j
+            else:
+                X = PI - theta_i - theta_o
+                j = np.round((c - X) / (2.0 * PI))
+                ktv = X + 2.0 * PI * j
+            tv = ktv / k
+            ok = valid & (tv > 0.0) & (tv < PI)
+            theta_s = 0.5 * (PI - tv)
+            G = np.where(ok, G_k_symmetric(theta_i, theta_s, float(k)), 0.0)
+            on = G > 0.0
+            if not np.any(on):
+                continue
+            ts = theta_s[on]
+            s = np.sin(ts)[:, None] * t[on] + np.cos(ts)[:, None] * n3[on]
+            D = mf.D(s)
+            wis = rho[on] * np.cos(theta_i[on] - ts)
+            jac = np.sin(ts) / (2.0 * k * np.maximum(hh[on], 1e-300))
+            F = fresnel_product(fresnel, rho[on], theta_i[on] + 0.5 * tv[on], tv[on],
+                                np.full(on.sum(), float(k)), k)
+            val = D * wis * G[on] * jac / (wi[on, 2] * wo[on, 2])
+            out[on] += val[:, None] * F
+    return out.reshape(shape[:-1] + (3,))
