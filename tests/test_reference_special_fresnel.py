@@ -68,3 +68,13 @@ def test_fresnel_conductor_spot_values():
     assert np.allclose(fresnel_conductor(0.0, n, k), 1.0)
     c = np.linspace(0.0, 1.0, 51)
     assert np.allclose(fresnel_conductor(c, 1.5, 0.0), fresnel_dielectric(c, 1.5), atol=1e-12)
+
+
+def test_reference_imports_without_bpy():
+    """addon.reference loads with numpy alone (no bpy import, no scipy)."""
+    import subprocess
+    import sys
+    code = ("import sys, addon.reference, addon.reference.quadrature; "
+            "assert 'bpy' not in sys.modules and 'scipy' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(
+        __import__("pathlib").Path(__file__).resolve().parents[1]))
