@@ -50,6 +50,18 @@ vector to_world(vector v, vector t, vector b, normal n) { return v[0] * t + v[1]
 
 vector reflect_about(vector w, vector m) { return 2.0 * dot(w, m) * m - w; }
 
+// Refraction of wi through a facet m (wi.m > 0), eta = n_t / n_i (Walter 2007 eq. 40).
+// Returns 0 on total internal reflection.
+int refract_about(vector wi, vector m, float eta, output vector wt)
+{
+    float c = dot(wi, m);
+    float cos_t2 = 1.0 - (1.0 - c * c) / (eta * eta);
+    if (cos_t2 <= 0.0)
+        return 0;
+    wt = (c / eta - sqrt(cos_t2)) * m - wi / eta;
+    return 1;
+}
+
 float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
 
 // ---------------------------------------------------------------------------------------
@@ -140,20 +152,24 @@ float D(int dist, vector m, float ax, float ay)
     return exp(-e) / (MFL_PI * ax * ay * z2 * z2);
 }
 
-// Smith Lambda (Heitz 2014 eqs. 72, 86): GGX closed form, Beckmann exact with erf.
+// Smith Lambda (Heitz 2014 eqs. 72, 80, 86): GGX closed form, Beckmann exact with erf;
+// anisotropic through the projected roughness. Uses |w.z|: the same on both sides, as the
+// transmission G2 needs.
 float lambda_(int dist, vector w, float ax, float ay)
 {
-    if (w[2] <= 0.0)
+    float z = abs(w[2]);
+    if (z <= 0.0)
         return 1e30;
-    float r2 = ax * ax * w[0] * w[0] + ay * ay * w[1] * w[1];  // alpha^2 tan^2 * cos^2
-    if (r2 <= 0.0)
+    float p2 = ax * ax * w[0] * w[0] + ay * ay * w[1] * w[1];  // alpha_0^2 tan^2 cos^2
+    if (p2 <= 0.0)
         return 0.0;
-    if (dist == MFL_DISTRIBUTION_GGX)
-        return 0.5 * (-1.0 + sqrt(1.0 + r2 / (w[2] * w[2])));
-    float a = w[2] / sqrt(r2);  // 1 / (alpha tan(theta))
-    if (a > 6.0)
-        return 0.0;  // exp(-36) below float precision
-    return 0.5 * (erf(a) - 1.0) + exp(-a * a) / (2.0 * a * MFL_SQRT_PI);
+    if (dist == MFL_DISTRIBUTION_GGX) {
+        float t2 = p2 / (z * z);
+        return t2 / (2.0 * (1.0 + sqrt(1.0 + t2)));  // = (-1 + sqrt(1 + t2)) / 2, stable
+    }
+    float a = z / sqrt(p2);  // 1 / (alpha tan(theta))
+    // (erf(a) - 1)/2 + exp(-a^2)/(2 a sqrt(pi)), written with erfc: no cancellation.
+    return max(0.5 * (exp(-a * a) / (a * MFL_SQRT_PI) - erfc(a)), 0.0);
 }
 
 // Smith G1 (Walter 2007 eq. 23 / Heitz 2014 eq. 43).
@@ -208,38 +224,39 @@ vector sample_dcos(int dist, float ax, float ay, float u1, float u2)
     return normalize(vector(-r * cos(phi) * ax, -r * sin(phi) * ay, 1.0));
 }
 
-// Beckmann visible slopes for alpha = 1 (Heitz & d'Eon 2014 sec. 4; Jakob 2014): invert
-// C(x) = [(1 + erf x)/2 + tan(t) exp(-x^2)/(2 sqrt(pi))] / (1 + Lambda) on (-inf, cot t]
-// by safeguarded Newton-bisection, then y = erfinv(2 u2 - 1).
-void sample_beckmann_visible_slopes(float cos_t, float u1, float u2,
+// Beckmann visible slopes for alpha = 1 (Heitz & d'Eon 2014 sec. 4 eq. 12): x solves
+// C(x) = [(1 + erf x)/2 + tan(t) exp(-x^2)/(2 sqrt(pi))] / (1 + Lambda) = u1 on (-inf, cot t].
+// As Jakob 2014 the unknown is b = erf(x) in [-1, erf(cot t)], where dC/db is bounded:
+// safeguarded Newton-bisection from Jakob's fitted initial guess, a fixed number of steps
+// (5 reach |dx| < 1e-9 in the numpy twin). y = erfinv(2 u2 - 1). No special case at normal
+// incidence: tan t = 0 reduces C to the Gaussian CDF.
+void sample_beckmann_visible_slopes(float cos_t_in, float sin_t, float u1, float u2,
                                     output float sx, output float sy)
 {
-    if (cos_t > 0.99999) {
-        float r = sqrt(-log(1.0 - min(u1, 0.99999994)));
-        sx = r * cos(2.0 * MFL_PI * u2);
-        sy = r * sin(2.0 * MFL_PI * u2);
-        return;
-    }
-    float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+    float cos_t = max(cos_t_in, 1e-7);
     float tan_t = sin_t / cos_t;
-    float cot_t = cos_t / sin_t;
-    float lam = lambda_(MFL_DISTRIBUTION_BECKMANN, vector(sin_t, 0, cos_t), 1.0, 1.0);
-    float norm = 1.0 / (1.0 + lam);
-    float lo = -6.0;
-    float hi = min(cot_t, 6.0);
-    float x = 0.5 * (lo + hi);
-    for (int i = 0; i < 24; ++i) {
-        float cdf = (0.5 * (1.0 + erf(x)) + tan_t * exp(-x * x) / (2.0 * MFL_SQRT_PI)) * norm;
-        float err = cdf - u1;
-        if (err > 0.0)
-            hi = x;
+    float cot_t = min(cos_t / max(sin_t, 1e-30), 6.0);  // slope mass beyond 6 is below 1e-16
+    float theta = atan(tan_t);
+    float hi = erf(cot_t);
+    float lo = -1.0;
+    float two_norm = 1.0 + hi + tan_t * exp(-cot_t * cot_t) / MFL_SQRT_PI;  // 2 (1 + Lambda)
+    float p = 1.0 + theta * (-0.876 + theta * (0.4265 - 0.0594 * theta));
+    float b = hi - (1.0 + hi) * pow(1.0 - u1, p);
+    for (int i = 0; i < 8; ++i) {
+        if (!(b >= lo && b <= hi))
+            b = 0.5 * (lo + hi);
+        float x = erfinv(b);
+        float f = (1.0 + b + tan_t * exp(-x * x) / MFL_SQRT_PI) / two_norm - u1;
+        float df = (1.0 - x * tan_t) / two_norm;
+        if (f > 0.0)
+            hi = b;
         else
-            lo = x;
-        float pdf = (1.0 - x * tan_t) * exp(-x * x) / MFL_SQRT_PI * norm;
-        float next = (pdf > 0.0) ? x - err / pdf : 0.5 * (lo + hi);
-        x = (next > lo && next < hi) ? next : 0.5 * (lo + hi);
+            lo = b;
+        b -= f / max(df, 1e-30);
     }
-    sx = x;
+    if (!(b >= lo && b <= hi))
+        b = 0.5 * (lo + hi);
+    sx = erfinv(b);
     sy = erfinv(2.0 * u2 - 1.0);
 }
 
@@ -255,10 +272,11 @@ vector sample_vndf(int dist, vector wi, float ax, float ay, float u1, float u2)
         vector h = vector(sin_t * cos(phi), sin_t * sin(phi), z) + wi_std;
         return normalize(vector(ax * h[0], ay * h[1], max(h[2], 0.0)));
     }
-    float sx, sy;
-    sample_beckmann_visible_slopes(wi_std[2], u1, u2, sx, sy);
-    // Rotate the slopes to the azimuth of wi, then unstretch (Heitz & d'Eon 2014 alg. 1).
+    // sin(theta) from the components, not from cos: exact near normal incidence.
     float rxy = sqrt(wi_std[0] * wi_std[0] + wi_std[1] * wi_std[1]);
+    float sx, sy;
+    sample_beckmann_visible_slopes(wi_std[2], rxy, u1, u2, sx, sy);
+    // Rotate the slopes to the azimuth of wi, then unstretch (Heitz & d'Eon 2014 alg. 1).
     float cphi = (rxy > 0.0) ? wi_std[0] / rxy : 1.0;
     float sphi = (rxy > 0.0) ? wi_std[1] / rxy : 0.0;
     float tx = cphi * sx - sphi * sy;
