@@ -178,6 +178,30 @@ WALTER_REFLECTION = _add(Model(
 ))
 
 
+WALTER_GLASS = _add(Model(
+    id="walter_glass",
+    label="Microfacet Glass (Walter 2007)",
+    year=2007,
+    shader="walter_glass",
+    tags=("glossy", "transmission", "transparent"),
+    doc="Rough dielectric interface: f_r = F G2 D / (4 |wi.n| |wo.n|) plus Walter's BTDF "
+        "f_t = |wi.h||wo.h| / (|wi.n||wo.n|) n_o^2 (1 - F) G2 D / (n_i wi.h + n_o wo.h)^2, "
+        "GGX or Beckmann D, separable or height-correlated G2, exact Fresnel with total "
+        "internal reflection; Cycles' transport convention (no 1/eta^2 factor). IOR 1 is a "
+        "clean pass-through; roughness 0 is perfect glass.",
+    params=(
+        TINT,
+        ROUGHNESS,
+        IOR,
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"]),
+        Param("masking", "Masking", ENUM, "height_correlated", items=ENUMS["masking"],
+              doc="Smith G2 for both lobes: height-correlated 1/(1+L(wi)+L(wo)) (as Cycles and "
+                  "pbrt-v4) or separable G1(wi) G1(wo) (Walter 2007)."),
+        Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
+    ),
+))
+
+
 def alphas(roughness: float, anisotropy: float = 0.0) -> tuple[float, float]:
     """Cycles' mapping from (roughness, anisotropy) to (alpha_x, alpha_y)."""
     a = roughness * roughness
