@@ -30,20 +30,21 @@ through the first chord [V_(k-1), V_k] with f(V_k) < l (the polygon is convex), 
     k = #{m >= 0 : R_m sin(phi0 + m theta_v) >= l}     (bounce count)
 
 Symmetric (R_m = 1, l in [0, 1]): k = floor((pi - asin(l) - phi0) / theta_v) + 1; its maximum
-over the beam (l -> 0, the ray through the apex) is floor((pi - theta_i) / theta_v + 1/2), and
-the beam splits into exactly two counts, k-1 and k (the seed's eq. 5-1 up to its angle
-convention, see the doc). Exit angle (the unfolding maps wedge k back onto the groove: a
-rotation by -k theta_v for even k, a reflection for odd k):
+over the beam (l -> 0, the ray through the apex)
+is floor((pi - theta_i) / theta_v + 1/2), and the beam splits into exactly two counts, k-1 and
+k. (The seed's eq. 5-1, floor((pi + 2 theta_i)/theta_v) + 1, is not this: 3 for a 90-degree
+groove at normal incidence where every ray makes 2 bounces; see the doc.)
+Exit angle (the unfolding maps wedge k back onto the groove: a rotation by -k theta_v for even
+k, a reflection for odd k):
 
     k even: theta_o = theta_i + k theta_v - pi
     k odd:  theta_o = 2 theta_l - theta_i - (k - 1) theta_v   (symmetric: pi - theta_i - k theta_v)
 
-i.e. theta_o = (-1)^k (theta_i + k theta_v - pi) for symmetric grooves. The seed's eq. 5-2,
-theta_o = (-1)^k (theta_i + pi - k theta_v), is this formula in the opposite angle convention
-(theta -> -theta, i.e. angles positive toward the first-hit wall's side); both of its cases
-are the same formula with k-1 and k: the case "k-1 reflections" uses (-1)^(k-1) with k-1 and
-the case "k reflections" uses (-1)^k with k, correctly paired once the bounce count is the
-count of the case (tested against the tracer). Bounce j (1-based) meets its wall at the 2D
+i.e. theta_o = (-1)^k (theta_i + k theta_v - pi) for symmetric grooves. The seed's eq. 5-2 is
+this one formula, theta_o(n) = (-1)^n (theta_i + pi - n theta_v), in the opposite angle
+convention (theta -> -theta), evaluated at the ray's own bounce count n (k-1 in its first case,
+k in its second): tested against the tracer ray by ray. Bounce j (1-based) meets its wall at
+the 2D
 cosine |sin(phi0 + (j-1) theta_v)|, the 3D cosine is rho times it (the Fresnel argument).
 wo = rho (sin theta_o t + cos theta_o n) - (wi.u) u.
 
@@ -219,7 +220,7 @@ def sample(wi, u, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax:
         theta_r = sample_partner(mf.distribution, mf.alpha_x, u[..., 3], u[..., 4], u[..., 5])
         tv = PI - theta_l - theta_r
     theta_i, rho, wu = _local(wi, t, ax)
-    L_l, L_r = np.sin(theta_r), np.sin(theta_l)   # wall lengths (depth sin_l sin_r); symmetric: equal
+    L_l, L_r = np.sin(theta_r), np.sin(theta_l)  # wall lengths (apex depth sin_l sin_r)
     if groove == "symmetric":
         L_l = L_r = np.ones_like(theta_l)
     fA = L_l * np.cos(theta_i - theta_l)
