@@ -117,9 +117,11 @@ def _sphere_node_group(radius: float):
     return group
 
 
-def add_spheres(scene, layout: GridLayout, materials: list):
+def add_spheres(scene, layout: GridLayout, materials: list, solid: bool = False):
     """One exact sphere per material, row-major; invisible to every secondary ray so that each
-    sees only the environment."""
+    sees only the environment (a single interface: a transmitted ray leaves unchanged). With
+    `solid`, spheres are visible to glossy and transmission rays: whole glass balls with entry,
+    internal bounces and exit (neighbours can then be seen too, alike in every render)."""
     if len(materials) > layout.count:
         raise ValueError(f"{len(materials)} materials for a grid of {layout.count} spheres")
     group = _sphere_node_group(layout.radius)
@@ -135,7 +137,8 @@ def add_spheres(scene, layout: GridLayout, materials: list):
         modifier = obj.modifiers.new("sphere", "NODES")
         modifier.node_group = group
         modifier[socket_id] = material
-        for ray in ("diffuse", "glossy", "transmission", "shadow", "volume_scatter"):
+        hidden = ("diffuse", "shadow", "volume_scatter")
+        for ray in hidden if solid else hidden + ("glossy", "transmission"):
             setattr(obj, f"visible_{ray}", False)
         scene.collection.objects.link(obj)
         objects.append(obj)
@@ -191,14 +194,14 @@ def check_compiled():
 
 
 def build_grid_scene(layout: GridLayout, materials: list, env: Environment,
-                     samples: int, seed: int = 0, max_bounces: int = 4):
+                     samples: int, seed: int = 0, max_bounces: int = 4, solid: bool = False):
     """The sphere-grid scene. `materials` is a list of bpy materials (None leaves a gap) made
     in the current file, e.g. with model_material() after new_scene()."""
     scene = bpy.context.scene
     configure_render(scene, layout, samples, seed, max_bounces)
     add_world(scene, env)
     add_camera(scene, layout)
-    add_spheres(scene, layout, materials)
+    add_spheres(scene, layout, materials, solid)
     check_compiled()
     return scene
 
@@ -226,7 +229,8 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
 
 
 def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, cols: int = 4,
-                 cell_px: int = 32, path: str | None = None, materials: list | None = None):
+                 cell_px: int = 32, path: str | None = None, materials: list | None = None,
+                 solid: bool = False, max_bounces: int = 4):
     """Build and render a grid of SphereSpecs (or of ready-made `materials`, made by a callable
     run after the scene is reset). Returns (layout, image, seconds)."""
     count = len(specs if materials is None else materials)
@@ -237,6 +241,6 @@ def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, col
                 for i, s in enumerate(specs)]
     else:
         mats = [None if make is None else make() for make in materials]
-    build_grid_scene(layout, mats, env, samples, seed)
+    build_grid_scene(layout, mats, env, samples, seed, max_bounces, solid)
     image, seconds = render(scene, path)
     return layout, image, seconds
