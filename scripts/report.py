@@ -1,0 +1,38 @@
+"""`make report`: error against render time, sampler weights, the reference's cost and numerical
+stability of every Microfacet Lab model, written to report/ (report.md, PNG plots,
+results.json). See addon/report.py.
+
+    python scripts/report.py            # full (about 15-25 min on 2 cores); refreshes docs/figures
+    python scripts/report.py --quick    # under 5 minutes
+    python scripts/report.py --smoke    # seconds: 2 sample counts, one tiny grid, one environment
+"""
+import argparse
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--quick", action="store_true", help="fewer samples, smaller grids")
+    group.add_argument("--smoke", action="store_true", help="a tiny run for the tests")
+    parser.add_argument("--out", default=str(ROOT / "report"), help="output folder")
+    parser.add_argument("--figures", default=None,
+                        help="copy the README figures here (default: docs/figures on a full run)")
+    parser.add_argument("--sections", default="convergence,samplers,refcost,stability",
+                        help="comma-separated subset of convergence,samplers,refcost,stability")
+    args = parser.parse_args(argv)
+    mode = "smoke" if args.smoke else "quick" if args.quick else "full"
+    figures = args.figures or (str(ROOT / "docs" / "figures") if mode == "full" else None)
+
+    from addon import report
+
+    report.run(mode, args.out, figures, sections=tuple(args.sections.split(",")))
+
+
+if __name__ == "__main__":
+    main()
