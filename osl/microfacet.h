@@ -62,6 +62,28 @@ int refract_about(vector wi, vector m, float eta, output vector wt)
     return 1;
 }
 
+// Cycles bends a closure normal whose mirror reflection of wi would dip below the geometric
+// surface (ensure_valid_specular_reflection), which would turn a refraction lobe through a
+// steep microfacet into a wrong direction. Every normal in the plane of wi and wo refracts wi
+// into wo for a suitable ratio: m' = -normalize(wi + eta' wo) (Walter 2007 eq. 16). Return the
+// first m' (eta' = eta, then 2, 4, 8, ...) that Cycles leaves alone, in world space, so the lobe
+// points exactly along wo. Arguments in world space; the threshold is Cycles'.
+normal refraction_closure_normal(vector wi, vector wo, float eta, output float eta_closure)
+{
+    float threshold = min(0.9 * dot(wi, Ng), 0.01) + 1e-4;
+    float e = eta;
+    for (int i = 0; i < 12; ++i) {
+        vector m = -normalize(wi + e * wo);
+        if (dot(wi, m) > 0.0 && dot(wo, m) < 0.0 && dot(reflect_about(wi, m), Ng) >= threshold) {
+            eta_closure = e;
+            return m;
+        }
+        e = (i == 0) ? max(2.0 * e, 2.0) : 2.0 * e;
+    }
+    eta_closure = eta;
+    return -normalize(wi + eta * wo);
+}
+
 float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
 
 // ---------------------------------------------------------------------------------------
