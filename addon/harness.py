@@ -170,6 +170,36 @@ def model_material(model_id: str, values: dict | None = None, name: str | None =
     return material
 
 
+def linked_model_material(model_id: str, values: dict, name: str):
+    """A model's material whose numeric inputs come through links from Value (and Combine XYZ)
+    nodes, so any value, NaN or out of range, reaches the shader unclamped by the sockets: the
+    way to test the OSL clamps. Enum values are set on the group node (validated)."""
+    from .catalog import COLOR, ENUM, MODELS
+
+    model = MODELS[model_id]
+    material, tree, output = _new_material(name)
+    enums = {k: v for k, v in values.items() if model.param(k).kind == ENUM}
+    group = nodes.add_group_node(tree, model_id, enums)
+    for key, value in values.items():
+        param = model.param(key)
+        if param.kind == ENUM:
+            continue
+        channels = value if param.kind == COLOR else (value,)
+        sources = []
+        for channel in channels:
+            source = tree.nodes.new("ShaderNodeValue")
+            source.outputs[0].default_value = channel
+            sources.append(source.outputs[0])
+        if param.kind == COLOR:
+            combine = tree.nodes.new("ShaderNodeCombineXYZ")
+            for i, socket in enumerate(sources):
+                tree.links.new(socket, combine.inputs[i])
+            sources = [combine.outputs[0]]
+        tree.links.new(sources[0], group.inputs[param.label])
+    tree.links.new(group.outputs["BSDF"], output.inputs["Surface"])
+    return material
+
+
 def osl_material(source: str, name: str):
     """A material made of a raw OSL script (used for Cycles' native closures in tests)."""
     material, tree, output = _new_material(name)

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness, nodes  # noqa: E402
+from addon import grid, harness  # noqa: E402
 from addon.catalog import MODELS  # noqa: E402
 from addon.grid import SphereSpec  # noqa: E402
 
@@ -30,34 +30,7 @@ BAD = [
 
 
 def linked_material(model_id, bad, name):
-    """A material whose group node gets `bad` through links from Value / Combine XYZ nodes."""
-    def make():
-        model = MODELS[model_id]
-        material = bpy.data.materials.new(name)
-        tree = material.node_tree
-        for node in list(tree.nodes):
-            tree.nodes.remove(node)
-        output = tree.nodes.new("ShaderNodeOutputMaterial")
-        safe = {k: v for k, v in bad.items() if model.param(k).kind == "enum"}
-        group = nodes.add_group_node(tree, model_id, safe)
-        for key, value in bad.items():
-            param = model.param(key)
-            if param.kind == "enum":
-                continue
-            if param.kind == "color":
-                combine = tree.nodes.new("ShaderNodeCombineXYZ")
-                for i, channel in enumerate(value):
-                    source = tree.nodes.new("ShaderNodeValue")
-                    source.outputs[0].default_value = channel
-                    tree.links.new(source.outputs[0], combine.inputs[i])
-                tree.links.new(combine.outputs[0], group.inputs[param.label])
-            else:
-                source = tree.nodes.new("ShaderNodeValue")
-                source.outputs[0].default_value = value
-                tree.links.new(source.outputs[0], group.inputs[param.label])
-        tree.links.new(group.outputs["BSDF"], output.inputs["Surface"])
-        return material
-    return make
+    return lambda: harness.linked_model_material(model_id, bad, name)
 
 
 @pytest.fixture(scope="module")

@@ -115,3 +115,19 @@ def test_ior_one_is_a_clean_pass_through():
     sphere = image[index >= 0][:, :3]
     # Straight through: every sphere pixel sees the world along -z, like the background.
     assert np.abs(sphere - grid.GRADIENT.radiance(-grid.VIEW)).max() < 1e-6
+
+
+def test_stress_grid_has_no_nan_inf_or_negative_pixel():
+    """IOR from 1/10 to 10, values at and around 1, invalid values (clamped as documented:
+    NaN -> 1.5, below 0.01 -> 0.01), roughness 0 to 1; whole balls, so total internal
+    reflection and grazing internal paths occur; every sphere also has grazing views at its rim.
+    Values reach the shader through linked Value nodes (see test_render_bad_input.py)."""
+    iors = (0.1, 0.5, 1 / 1.5, 1 - 1e-6, 1.0, 1 + 1e-6, 1.5, 3.0, 10.0, 0.0, -1.0, float("nan"))
+    roughness = (0.0, 1e-4, 0.3, 1.0)
+    makers = [lambda ior=ior, r=r, name=f"stress {i} {j}": harness.linked_model_material(
+                  "walter_glass", {"ior": ior, "roughness": r}, name)
+              for i, ior in enumerate(iors) for j, r in enumerate(roughness)]
+    layout, image, _ = harness.render_specs(None, grid.GRADIENT, 16, seed=9, cols=8,
+                                            materials=makers, solid=True, max_bounces=32)
+    assert np.isfinite(image).all(), "NaN or Inf pixels"
+    assert (image >= 0).all(), "negative pixels"
