@@ -1,6 +1,8 @@
 """`make demo`: the sphere gallery, rendered headless with Cycles OSL, no outside assets.
 
-Models x roughness under two environments (a white furnace and a smooth gradient). Writes
+Models x roughness under two environments (a white furnace and a smooth gradient). Glass is
+rendered as a single interface, as the reference computes it: the refracted ray meets the
+world directly (spheres are invisible to secondary rays). Writes
 out/gallery.png and one EXR per environment, and prints each sphere's error against the numpy
 reference and the render times.
 """
@@ -27,6 +29,7 @@ ROWS = [
     ("Walter Beckmann copper", "walter_reflection",
      {"distribution": "beckmann", "fresnel_type": "conductor", **COPPER}),
     ("Walter GGX, F = 1", "walter_reflection", {"distribution": "ggx", "fresnel_type": "none"}),
+    ("Walter glass, IOR 1.5", "walter_glass", {"distribution": "ggx", "ior": 1.5}),
 ]
 
 
