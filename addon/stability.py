@@ -215,10 +215,14 @@ def _sample(bsdf, wi, u):
 
 
 def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride: int = 1,
-                models=None, roughness=None, progress=None, seed: int = 0) -> dict:
+                models=None, roughness=None, progress=None, seed: int = 0,
+                factory=None) -> dict:
     """The sweep over every catalog model (or `models`). Returns {model_id: ModelSweep} plus
-    '_total' (a ModelSweep summing all) and '_z_crit' (the energy threshold in std errors)."""
+    '_total' (a ModelSweep summing all) and '_z_crit' (the energy threshold in std errors).
+    `factory(model_id, values)` builds the BSDF (default: the numpy reference's make_bsdf)."""
     from .reference import make_bsdf
+
+    make_bsdf = factory or make_bsdf
 
     rng = np.random.default_rng(seed)
     wis = incident_directions()
