@@ -689,7 +689,7 @@ def plot_convergence(conv, rows, path, dpi=72):
     plt.close(fig)
 
 
-def plot_sampler_study(study, cfg, path, dpi=80):
+def plot_sampler_study(study, cfg, path, dpi=70):
     plt = _plt()
     models = list(study)
     if not models:
