@@ -113,6 +113,7 @@ ENUMS: dict[str, tuple[str, ...]] = {
     "masking": ("height_correlated", "separable"),
     "fresnel_type": ("conductor", "dielectric", "none"),
     "sampler": ("dcos", "vndf", "vcavity"),
+    "groove": ("symmetric", "asymmetric"),
 }
 SAMPLERS = ENUMS["sampler"]
 SAMPLER_DOC = ("dcos: Walter 2007, m ~ D(m)(m.n); vndf: Heitz & d'Eon 2014 visible normals of the "
@@ -198,6 +199,36 @@ WALTER_GLASS = _add(Model(
               doc="Smith G2 for both lobes: height-correlated 1/(1+L(wi)+L(wo)) (as Cycles and "
                   "pbrt-v4) or separable G1(wi) G1(wo) (Walter 2007)."),
         Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
+    ),
+))
+
+
+LEE_VGROOVE = _add(Model(
+    id="lee_vgroove",
+    label="Microfacet Multi-Bounce V-Groove (Lee 2018)",
+    year=2018,
+    shader="lee_vgroove",
+    tags=("glossy",),
+    doc="Kaleidoscopic multiple mirror reflection inside V-grooves (Lee, Jarabo, Jeon, Gutierrez, "
+        "Kim 2018): a groove and an entry point are sampled, the bounce count and the exit "
+        "direction follow in closed form, and the sample carries the product of the exact "
+        "Fresnel terms of its bounces. With F = 1 every sample weighs exactly 1 (no energy "
+        "loss at any roughness). Derivation: docs/lee-asymmetric-grooves.md.",
+    params=(
+        TINT,
+        ROUGHNESS,
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"]),
+        Param("groove", "Groove", ENUM, "symmetric", items=ENUMS["groove"],
+              doc="symmetric: both walls drawn from D (Heitz's V-cavities); asymmetric: the "
+                  "partner wall from the size-biased law D(theta) sin^2(theta), which keeps "
+                  "the projected-area distribution of normals equal to D."),
+        Param("fresnel_type", "Fresnel", ENUM, "conductor", items=ENUMS["fresnel_type"],
+              doc="Exact conductor (N, K), exact dielectric (IOR), or none (F = 1), per bounce."),
+        IOR, CONDUCTOR_N, CONDUCTOR_K,
+        Param("max_bounces", "Max Bounces", FLOAT, 0.0, 0.0, 1000.0,
+              doc="0 = derived from the roughness (paths beyond carry < 1e-4 of the energy); "
+                  "otherwise the Fresnel loop stops at this count (later bounces count as "
+                  "F = 1; the exit direction is always exact)."),
     ),
 ))
 

@@ -157,4 +157,14 @@ def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
             Microfacet(params["distribution"], ax, ay), masking=params["masking"],
             sampler=params["sampler"], fresnel=params["fresnel_type"], ior=params["ior"],
             n=params["n"], k=params["k"], tint=params["base_color"])
+    if model_id == "lee_vgroove":
+        # Lee et al. 2018 (addon/reference/lee.py): kaleidoscopic multi-bounce V-grooves.
+        from .lee import LeeBRDF
+        from .microfacet import Microfacet as _Microfacet
+
+        ax, _ = alphas(params["roughness"])
+        return LeeBRDF(_Microfacet(params["distribution"], ax), groove=params["groove"],
+                       fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"],
+                       k=params["k"], tint=params["base_color"],
+                       max_bounces_param=params["max_bounces"])
     raise KeyError(f"no reference implementation for model {model_id!r}")

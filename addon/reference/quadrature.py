@@ -173,7 +173,10 @@ def tabulate_moments(bsdf, n_mu: int = 48, order: int = DEFAULT_ORDER) -> Moment
     """Moments at n_mu incidences uniform in log(mu) on [MU_MIN, 1], for `moments_at`."""
     x = np.linspace(np.log(MU_MIN), 0.0, n_mu)
     mu = np.minimum(np.exp(x), 1.0 - 1e-8)  # Vt / sin(theta) at theta -> 0 as a limit
-    E, Vn, Vt = directional_moments(bsdf, mu, order=order)
+    if hasattr(bsdf, "directional_moments"):  # a model with its own deterministic moments (Lee)
+        E, Vn, Vt = bsdf.directional_moments(mu)
+    else:
+        E, Vn, Vt = directional_moments(bsdf, mu, order=order)
     return MomentTable(x, E, Vn, Vt / np.sqrt(1.0 - mu * mu)[:, None])
 
 
