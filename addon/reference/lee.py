@@ -495,42 +495,62 @@ def _radial_nodes(distribution: str, alpha: float, n: int, partner: bool = False
 
 
 def _groove_nodes(mf: Microfacet, groove: str, n_theta: int, n_phi: int, n_partner: int):
-    """Quadrature nodes of the grooves met by a ray (any wi: by opening area): the drawn wall
-    s ~ D(s)(s.n) on a midpoint grid of (_radial_nodes, azimuth in [0, pi): the other half by
-    the symmetry y -> -y, wi lying in the xz plane), times, for asymmetric grooves, the
-    partner angle (_radial_nodes, partner=True). Returns (s, theta_l, theta_r, weight)."""
+    """Quadrature nodes of the grooves met by a ray (any wi: by opening area). Returns
+    (s, theta_l, theta_r, weight), weights summing to 1; the azimuth covers [0, pi), the other
+    half by the symmetry y -> -y (wi lies in the xz plane).
+    Symmetric: the drawn wall s ~ D(s)(s.n) on the tensor midpoint grid (_radial_nodes x
+    n_phi azimuths). Asymmetric (a 3D integral, where a tensor grid converges slowly): the
+    first n_partner * n_theta * n_phi points of the R3 low-discrepancy sequence (Roberts 2018,
+    the generalised golden ratio), mapped to (drawn wall, azimuth, partner) by the smooth
+    variables of _radial_nodes, weighted by the densities there (self-normalised)."""
     a = mf.alpha_x
-    tan_t, w1 = _radial_nodes(mf.distribution, a, n_theta)
-    phi = (np.arange(n_phi) + 0.5) / n_phi * PI
-    T, P = np.meshgrid(np.arctan(tan_t), phi, indexing="ij")
-    th, P = T.ravel(), P.ravel()
-    s = np.stack([-np.sin(th) * np.cos(P), -np.sin(th) * np.sin(P), np.cos(th)], axis=-1)
-    W = np.repeat(w1, n_phi) / n_phi
     if groove == "symmetric":
-        return s, th, th, W
-    tan_p, wp = _radial_nodes(mf.distribution, a, n_partner, partner=True)
-    G = len(s)
-    return (np.repeat(s, n_partner, axis=0), np.repeat(th, n_partner),
-            np.tile(np.arctan(tan_p), G), np.repeat(W, n_partner) * np.tile(wp, G))
+        tan_t, w1 = _radial_nodes(mf.distribution, a, n_theta)
+        phi = (np.arange(n_phi) + 0.5) / n_phi * PI
+        T, P = np.meshgrid(np.arctan(tan_t), phi, indexing="ij")
+        th, P = T.ravel(), P.ravel()
+        W = np.repeat(w1, n_phi) / n_phi
+        tr = th
+    else:
+        g = 1.2207440846057596  # the real root of x^4 = x + 1
+        N = n_theta * n_phi * n_partner
+        v = np.mod(0.5 + np.arange(N)[:, None] * np.array([1 / g, 1 / g ** 2, 1 / g ** 3]), 1.0)
+        v1, v2, v3 = v.T
+        if mf.distribution == "ggx":
+            x = 0.5 * PI * v1
+            w1, th = np.sin(2.0 * x), np.arctan(a * np.tan(x))
+            b = 0.5 * PI * (1.0 - (1.0 - v3) ** 2)
+            w3, tr = np.sin(b) ** 2 * (1.0 - v3), np.arctan(a * np.tan(b))
+        else:
+            y1, y3 = BECKMANN_Y_MAX * v1, BECKMANN_Y_MAX * v3
+            w1, th = 2.0 * y1 * np.exp(-y1 * y1), np.arctan(a * y1)
+            w3, tr = y3 * y3 * np.exp(-y3 * y3), np.arctan(a * y3)
+        P = PI * v2
+        W = w1 * w3 / np.sum(w1 * w3)
+    s = np.stack([-np.sin(th) * np.cos(P), -np.sin(th) * np.sin(P), np.cos(th)], axis=-1)
+    return s, th, tr, W
 
 
-# Default (n_theta, n_phi, n_partner) of moments(): measured accuracy (max abs error of E, Vn,
-# Vt over mu, gold, alpha 0.0025 .. 1, against 2x-4x finer rules) about 5e-5 symmetric,
-# 3e-4 asymmetric GGX, 1e-3 asymmetric Beckmann at alpha 1 (tests/test_reference_lee_moments.py).
+# Default (n_theta, n_phi, n_partner) of moments() (asymmetric: R3 points = their product).
+# Measured accuracy (max abs error of E, Vn, Vt over mu, gold, against much finer rules;
+# scripts/lee_furnace.py --accuracy): about 1e-4 symmetric, 5e-4 asymmetric, 1e-3 asymmetric
+# Beckmann at alpha 1; the render test (tests/test_render_lee.py) uses these as its floors.
 MOMENT_NODES = {
-    ("symmetric", "ggx"): (160, 160, 1),
-    ("symmetric", "beckmann"): (160, 160, 1),
-    ("asymmetric", "ggx"): (64, 64, 24),
-    ("asymmetric", "beckmann"): (64, 64, 32),
+    ("symmetric", "ggx"): (128, 128, 1),
+    ("symmetric", "beckmann"): (128, 128, 1),
+    ("asymmetric", "ggx"): (128, 128, 2),
+    ("asymmetric", "beckmann"): (128, 128, 2),
 }
 
 
 class FresnelTable:
-    """A Fresnel callable tabulated on [0, 1] in cos (n + 1 nodes, linear interpolation;
-    exact at the nodes). For the moments' inner loop, where the exact conductor formula
-    dominated the cost; the interpolation error is below 1e-7 at n = 8192 (tested)."""
+    """A Fresnel callable tabulated on [0, 1] in cos (n + 1 uniform nodes, linear
+    interpolation by direct indexing; exact at the nodes). For the moments' inner loop, where
+    the exact conductor formula dominated the cost; the interpolation error is below 1e-7 at
+    n = 8192 (tested)."""
 
     def __init__(self, fresnel, n: int = 8192):
+        self.n = n
         self.c = np.linspace(0.0, 1.0, n + 1)
         self.F = np.asarray(fresnel(self.c), dtype=float)
         self.constant = bool(np.all(self.F == self.F[0]))
@@ -539,7 +559,10 @@ class FresnelTable:
         c = np.asarray(c, dtype=float)
         if self.constant:
             return np.broadcast_to(self.F[0], c.shape + (3,))
-        return np.stack([np.interp(c, self.c, self.F[:, ch]) for ch in range(3)], axis=-1)
+        x = np.clip(c, 0.0, 1.0) * self.n
+        i = np.minimum(x.astype(np.int64), self.n - 1)
+        f = (x - i)[..., None]
+        return self.F[i] * (1.0 - f) + self.F[i + 1] * f
 
 
 def moments(mu, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax: int | None = None,
@@ -608,26 +631,26 @@ def moments(mu, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax: i
         acc = np.zeros((3, 3))
         j_done, C = 0, 1
         while len(prev):
-            # Bounces j_done + 1 .. j_done + C of every live run as one (runs, C) block.
-            jj = np.arange(j_done + 1, j_done + C + 1, dtype=float)[None, :]
-            c = np.minimum(rho2[:, None] * np.abs(np.sin(phi0[:, None] + (jj - 1.0) * tv[:, None])), 1.0)
-            Fb = np.where((jj <= kmax)[..., None], fresnel(c), 1.0)
-            Fcum = F[:, None, :] * np.cumprod(Fb, axis=1)
-            R = np.where(np.mod(jj, 2.0) == 0.0, Ll[:, None], Lr[:, None])
+            # Bounces j_done + 1 .. j_done + C of every live run as one (C, runs) block
+            # (bounce-major: the cumulative products and minima run along contiguous rows).
+            jj = np.arange(j_done + 1, j_done + C + 1, dtype=float)[:, None]
+            c = np.minimum(rho2 * np.abs(np.sin(phi0 + (jj - 1.0) * tv)), 1.0)
+            Fb = fresnel(c)
+            if j_done + C > kmax:
+                Fb = np.where((jj <= kmax)[..., None], Fb, 1.0)
+            Fcum = F * np.cumprod(Fb, axis=0)
+            R = np.where(np.mod(jj, 2.0) == 0.0, Ll, Lr)
             rm = np.minimum.accumulate(np.concatenate(
-                [run_min[:, None], R * np.sin(phi0[:, None] + jj * tv[:, None])], axis=1), axis=1)[:, 1:]
-            cur = np.minimum(np.clip(np.minimum(rm, hi[:, None]) - lo[:, None], 0.0, None),
-                             prev[:, None])
-            before = np.concatenate([prev[:, None], cur[:, :-1]], axis=1)
-            w = (before - cur) * scale[:, None]  # beam fraction with exactly j bounces
-            theta_o = np.clip(sg[:, None] * exit_angle(ti[:, None], tl[:, None], tr[:, None], jj),
-                              -0.5 * PI, 0.5 * PI)
-            wF = w[..., None] * Fcum
-            acc[0] += wF.sum((0, 1))
-            acc[1] += np.einsum("rj,rjc->c", rho2[:, None] * np.cos(theta_o), wF)
-            acc[2] += np.einsum("rj,rjc->c", rho2[:, None] * np.sin(theta_o) * tx2[:, None]
-                                + (wu2 * ty2)[:, None], wF)  # wo.x
-            prev, run_min, F = cur[:, -1], rm[:, -1], Fcum[:, -1]
+                [run_min[None, :], R * np.sin(phi0 + jj * tv)], axis=0), axis=0)[1:]
+            cur = np.minimum(np.clip(np.minimum(rm, hi) - lo, 0.0, None), prev)
+            before = np.concatenate([prev[None, :], cur[:-1]], axis=0)
+            w = (before - cur) * scale  # beam fraction with exactly j bounces
+            theta_o = np.clip(sg * exit_angle(ti, tl, tr, jj), -0.5 * PI, 0.5 * PI)
+            wF = (w[..., None] * Fcum).reshape(-1, 3)
+            acc[0] += wF.sum(0)
+            acc[1] += (rho2 * np.cos(theta_o)).reshape(-1) @ wF
+            acc[2] += (rho2 * np.sin(theta_o) * tx2 + wu2 * ty2).reshape(-1) @ wF  # wo.x
+            prev, run_min, F = cur[-1], rm[-1], Fcum[-1]
             keep = prev > 0.0
             (ti, tl, tr, Ll, Lr, lo, hi, tv, scale, rho2, wu2, tx2, ty2, sg, phi0, run_min, F,
              prev) = (a[keep] for a in (ti, tl, tr, Ll, Lr, lo, hi, tv, scale, rho2, wu2, tx2,

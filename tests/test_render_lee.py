@@ -1,0 +1,145 @@
+"""Lee 2018 multi-bounce V-grooves rendered in Cycles OSL (osl/lee_vgroove.osl) against the numpy
+twin, and the white furnace that single scattering fails.
+
+1. Sphere grids (symmetric and asymmetric grooves, GGX and Beckmann, roughness 0.05 .. 1, gold)
+   against the reference image built from LeeBRDF's deterministic directional moments
+   (addon/reference/lee.py `moments`, checked against lee.sample Monte Carlo in
+   tests/test_reference_lee_moments.py), with the statistics of tests/test_render_reference.py:
+   Sidak-corrected z-test per sphere and band of mu plus the reference's accuracy, and the 1%
+   criterion per sphere on two pooled seeds with a power check.
+2. The zero-noise furnace: with F = 1 every sample weighs exactly 1, so in a white environment
+   every sphere pixel is 1 to float precision at any roughness and sample count.
+3. Furnace grids up to alpha = 1 (the seed's figs. 21-22): Lee keeps all the energy, single
+   scattering (Walter GGX with height-correlated Smith, Cook-Torrance with V-cavities) loses
+   more and more as the roughness grows, and Cycles' own multiple-scattering GGX sits between.
+   The numbers and the picture: scripts/lee_furnace.py (out/lee_furnace.png).
+"""
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.render
+
+bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
+
+from addon import grid, harness  # noqa: E402
+from addon.grid import SphereSpec  # noqa: E402
+from addon.reference.quadrature import moments_at  # noqa: E402
+
+ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
+SAMPLES = 256
+CELL_PX = 32
+# Accuracy of the reference per groove kind (the default quadrature rules of lee.moments;
+# measured by addon/bench_lee.py:moments_accuracy, floors of tests/test_reference_lee_moments.py).
+# Symmetric grooves meet grid.REFERENCE_ACCURACY's order; the asymmetric rule is a 3D
+# low-discrepancy rule, coarser at the test's time budget.
+ACCURACY = {"symmetric": 2e-4, "asymmetric": 1.5e-3}
+
+SPECS = [SphereSpec("lee_vgroove", {"groove": g, "distribution": d, "fresnel_type": "conductor",
+                                    "roughness": r}, f"lee {g} {d} r={r}")
+         for g in ("symmetric", "asymmetric") for d in ("ggx", "beckmann") for r in ROUGHNESS]
+
+
+def _floor(spec):
+    return max(grid.REFERENCE_ACCURACY, ACCURACY[spec.values["groove"]])
+
+
+@pytest.fixture(scope="module")
+def tables():
+    return grid.reference_tables(SPECS)
+
+
+@pytest.fixture(scope="module", params=["white", "gradient"])
+def converged(request, tables):
+    env = grid.ENVIRONMENTS[request.param]
+    layout, image, _ = harness.render_specs(SPECS, env, SAMPLES, seed=1, cell_px=CELL_PX)
+    _, image2, _ = harness.render_specs(SPECS, env, SAMPLES, seed=2, cell_px=CELL_PX)
+    reference = grid.reference_image(layout, tables, env, moments_at)
+    return env, layout, image, image2, reference
+
+
+def test_no_nan_and_background_is_environment(converged):
+    env, layout, image, image2, _ = converged
+    assert np.isfinite(image).all() and np.isfinite(image2).all()
+    background = image[grid.background_mask(layout)][:, :3]
+    assert np.allclose(background, env.radiance(-grid.VIEW), atol=1e-5)
+
+
+def test_lee_converges_to_reference(converged):
+    env, layout, image, _, reference = converged
+    bands = grid.band_stats(layout, image, reference)
+    z_crit = grid.sidak_z(3 * len(bands))
+    failures = []
+    for b in bands:
+        spec = SPECS[b.sphere]
+        if (np.abs(b.bias) > z_crit * b.stderr + _floor(spec)).any():
+            failures.append(f"{spec.label} mu in {b.band}: bias {b.bias} stderr {b.stderr} "
+                            f"ref {b.reference}")
+    assert not failures, f"z_crit {z_crit:.2f} ({env.name}):\n" + "\n".join(failures)
+
+
+def test_every_sphere_within_one_percent(converged):
+    env, layout, image, image2, reference = converged
+    pooled = 0.5 * (image + image2)
+    spheres = grid.band_stats(layout, pooled, reference, bands=((0.05, 1.0001),))
+    z_crit = grid.sidak_z(3 * len(spheres))
+    weak, biased = [], []
+    for s in spheres:
+        relative_noise = s.stderr / s.reference
+        relative_bias = np.abs(s.bias) / s.reference
+        if (relative_noise * z_crit > 0.01).any():
+            weak.append(f"{SPECS[s.sphere].label}: relative noise {relative_noise}")
+        if (relative_bias > 0.01).any():
+            biased.append(f"{SPECS[s.sphere].label}: relative bias {relative_bias}")
+    assert not weak, "\n".join(weak)
+    assert not biased, "\n".join(biased)
+
+
+def test_noise_estimate_is_calibrated(converged):
+    env, layout, image, image2, reference = converged
+    s1 = grid.band_stats(layout, image, reference)
+    s2 = grid.band_stats(layout, image2, reference)
+    z = np.array([(a.bias[1] - b.bias[1]) / np.sqrt(a.stderr[1] ** 2 + b.stderr[1] ** 2)
+                  for a, b in zip(s1, s2) if a.stderr[1] > 0])
+    assert abs(z.var() - 1.0) < 5 * np.sqrt(2.0 / len(z)), f"var(z) = {z.var():.3f}, n = {len(z)}"
+
+
+# -- the zero-noise furnace ---------------------------------------------------------------------
+def test_zero_noise_furnace():
+    """F = 1: every sample returns exactly 1, so 4 samples per pixel give 1 everywhere, for
+    every groove, distribution and roughness (0 = mirror included), and the Max Bounces
+    override changes nothing (it only stops the Fresnel loop)."""
+    specs = [SphereSpec("lee_vgroove", {"groove": g, "distribution": d, "fresnel_type": "none",
+                                        "roughness": r, "max_bounces": mb}, f"{g} {d} {r} {mb}")
+             for g in ("symmetric", "asymmetric") for d in ("ggx", "beckmann")
+             for r in (0.0, 0.05, 0.5, 1.0) for mb in (0.0, 2.0)]
+    layout, image, _ = harness.render_specs(specs, grid.WHITE, 4, seed=3, cols=8, cell_px=24)
+    index, _, _ = layout.pixel_geometry()
+    assert np.isfinite(image).all()
+    err = np.abs(image[index >= 0][:, :3] - 1.0).max()
+    assert err < 1e-4, f"max |pixel - 1| = {err}"
+
+
+# -- furnace grids: Lee vs single scattering vs Cycles' multi-scattering GGX ---------------------
+FURNACE_ALPHAS = (0.25, 0.5, 0.75, 1.0)
+
+
+@pytest.fixture(scope="module")
+def furnace():
+    from addon.bench_lee import furnace_means
+    return furnace_means(FURNACE_ALPHAS, samples=64, cell_px=32)
+
+
+def test_lee_keeps_all_energy(furnace):
+    for name in ("Lee symmetric GGX", "Lee asymmetric GGX", "Lee symmetric Beckmann"):
+        assert np.abs(np.asarray(furnace[name]) - 1.0).max() < 1e-4, (name, furnace[name])
+
+
+def test_single_scattering_loses_energy_growing_with_roughness(furnace):
+    for name in ("Walter GGX (single)", "Cook-Torrance (single)"):
+        loss = 1.0 - np.asarray(furnace[name])
+        assert (np.diff(loss) > 0).all(), (name, loss)  # grows with alpha
+        assert loss[0] > 0.01 and loss[-1] > 0.1, (name, loss)
+    # Cycles' multiple-scattering GGX recovers most of what single scattering loses.
+    single = np.asarray(furnace["Walter GGX (single)"])
+    multi = np.asarray(furnace["Cycles multi-GGX"])
+    assert (multi > single + 0.5 * (1.0 - single)).all(), (multi, single)
