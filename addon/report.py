@@ -64,6 +64,8 @@ class Config:
     sun_nodes: tuple  # (radial, azimuthal) of the sun-disk quadrature; the check uses half
     moment_order: int = 6
     seed: int = 0
+    combo_seconds: float = 20.0  # stability sweep: per parameter combination
+    model_seconds: float = 240.0  # stability sweep: per model
 
 
 def config(mode: str) -> Config:
@@ -76,10 +78,11 @@ def config(mode: str) -> Config:
         return Config("quick", (1, 4, 16, 64, 256), 16, (0.1, 0.3, 0.6, 1.0),
                       ("white", "gradient", "sun"), 8, 256, "quick", 8000,
                       (0.0, 30.0, 60.0, 80.0, 87.0, 89.0, 89.9), (0.1, 0.3, 1.0), 64,
-                      (2, 4, 6), 10, 16, (16, 32))
+                      (2, 4, 6), 10, 16, (16, 32), combo_seconds=5.0, model_seconds=30.0)
     if mode == "smoke":
         return Config("smoke", (1, 8), 10, (0.3, 1.0), ("gradient",), 200, 64, "none", 500,
-                      (0.0, 60.0, 89.9), (0.3,), 32, (2,), 4, 8, (8, 16), moment_order=4)
+                      (0.0, 60.0, 89.9), (0.3,), 32, (2,), 4, 8, (8, 16), moment_order=4,
+                      combo_seconds=1.0, model_seconds=3.0)
     raise ValueError(f"unknown mode {mode!r}")
 
 
@@ -490,7 +493,7 @@ def sampler_study(cfg, progress) -> dict:
                 for th in cfg.study_thetas:
                     t = math.radians(th)
                     wi = np.array([math.sin(t), 0.0, math.cos(t)])
-                    u = rng.random((cfg.study_samples, 4))
+                    u = rng.random((cfg.study_samples, stability.U_DIMS))
                     _, w, _ = stability._sample(bsdf, np.broadcast_to(wi, (len(u), 3)), u)
                     w = np.asarray(w, float).mean(-1)
                     var.append(float(w.var()))
@@ -884,18 +887,32 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
           "conductor n, k extremes, every enum; incidence up to 90 deg - 1e-6 and 90; wo = wi, "
           "wo ~ wi, the mirror, wo.h -> 0, grazing wo, both hemispheres; uniforms at 0 and "
           "1 - 2^-53.\n")
-        a("| model | combinations | cases | NaN | Inf | negative | non-unit wo | energy violations | max albedo | time (s) |")
-        a("|---|---|---|---|---|---|---|---|---|---|")
+        a("| model | combinations | cases | NaN | Inf | negative | non-unit wo | energy violations | exceptions | max albedo | time (s) |")
+        a("|---|---|---|---|---|---|---|---|---|---|---|")
+        sweep_notes = []
         for k, rec in sweep.items():
             if k.startswith("_"):
                 continue
             if rec.skipped:
-                a(f"| {MODELS[k].label} | skipped: {rec.skipped} | | | | | | | | |")
+                a(f"| {MODELS[k].label} | skipped: {rec.skipped} | | | | | | | | | |")
                 continue
             a(f"| {MODELS[k].label} | {rec.combos} | {rec.cases:,} | {rec.nan} | {rec.inf} | "
-              f"{rec.negative} | {rec.non_unit} | {rec.energy} | {rec.max_albedo:.4f} | {rec.seconds:.1f} |")
+              f"{rec.negative} | {rec.non_unit} | {rec.energy} | {rec.errors} | {rec.max_albedo:.4f} | "
+              f"{rec.seconds:.1f} |")
+            extra = ((f" eval not implemented for {rec.unsupported} combinations (sampled "
+                      "only)." if rec.unsupported else "")
+                     + (f" {rec.timeouts} combinations slower than the per-combination limit "
+                        f"of {cfg.combo_seconds:g} s (listed below)." if rec.timeouts else "")
+                     + (f" Time budget ({cfg.model_seconds:g} s) spent: {rec.budget_stop} "
+                        "combinations not run." if rec.budget_stop else ""))
+            if extra:
+                sweep_notes.append(f"{MODELS[k].label}:{extra}")
         a(f"| **all** | {tot.combos} | {tot.cases:,} | **{tot.nan}** | **{tot.inf}** | "
-          f"**{tot.negative}** | {tot.non_unit} | **{tot.energy}** | {tot.max_albedo:.4f} | {tot.seconds:.1f} |")
+          f"**{tot.negative}** | {tot.non_unit} | **{tot.energy}** | **{tot.errors}** | "
+          f"{tot.max_albedo:.4f} | {tot.seconds:.1f} |")
+        a("")
+        for n in sweep_notes:
+            a(f"- {n}")
         a("")
         if tot.examples:
             a("First offending inputs:\n")
@@ -987,7 +1004,8 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
     if "stability" in sections:
         progress("numpy stability sweep")
         sweep = stability.numpy_sweep(albedo_samples=cfg.albedo_samples, stride=cfg.sweep_stride,
-                                      progress=progress)
+                                      progress=progress, combo_seconds=cfg.combo_seconds,
+                                      model_seconds=cfg.model_seconds)
         tot = sweep["_total"]
         progress(f"numpy sweep: {tot.cases:,} cases, NaN {tot.nan}, Inf {tot.inf}, negative "
                  f"{tot.negative}, energy {tot.energy}")

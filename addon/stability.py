@@ -90,10 +90,9 @@ def parameter_combos(model_id: str, max_combos: int = MAX_COMBOS, roughness=None
             combos += [{**base, "n": n, "k": k} for n, k in CONDUCTORS]
         else:
             combos.append(base)
-    if len(combos) > max_combos:
-        pick = np.random.default_rng(1).choice(len(combos), max_combos, replace=False)
-        combos = [combos[i] for i in sorted(pick)]
-    return combos
+    # A deterministic shuffle: a stride or a time budget then still covers every axis.
+    order = np.random.default_rng(1).permutation(len(combos))[:max_combos]
+    return [combos[i] for i in order]
 
 
 def describe(values: dict) -> str:
@@ -170,6 +169,10 @@ class ModelSweep:
     negative: int = 0
     non_unit: int = 0
     energy: int = 0
+    errors: int = 0  # exceptions raised on an input (each one is a failure)
+    timeouts: int = 0  # combinations stopped by the per-combination time limit (listed)
+    budget_stop: int = 0  # combinations left out when the model's time budget ran out
+    unsupported: int = 0  # combinations whose eval raises NotImplementedError (not counted)
     max_albedo: float = 0.0
     examples: list = field(default_factory=list)
     skipped: str = ""
@@ -181,7 +184,7 @@ class ModelSweep:
 
     @property
     def failures(self) -> int:
-        return self.nan + self.inf + self.negative + self.non_unit + self.energy
+        return self.nan + self.inf + self.negative + self.non_unit + self.energy + self.errors
 
 
 def _note(rec: ModelSweep, kind: str, values: dict, detail: str, limit: int = 12):
@@ -206,20 +209,110 @@ def _count(rec, name, arr, values, what, where_fn, signed=False):
             _note(rec, f"{label} in {what}.{name}", values, where_fn(i) + f" -> {per[i]}")
 
 
+U_DIMS = 8  # uniforms drawn per sample; a model takes the first 3, 4, 6 or 8 it needs
+
+
 def _sample(bsdf, wi, u):
-    """bsdf.sample with 3 uniforms, or 4 for a model that needs a lobe choice."""
+    """bsdf.sample with the fewest uniforms it accepts (3 for a microfacet normal, one more for
+    a lobe choice, more for a groove: the catalog does not say, so try)."""
+    for n in (3, 4, 6, U_DIMS):
+        try:
+            return bsdf.sample(wi, u[..., :n])
+        except (IndexError, ValueError):
+            if n == U_DIMS:
+                raise
+
+
+class _Timeout(Exception):
+    pass
+
+
+class _time_limit:
+    """SIGALRM-based limit (main thread on Unix; elsewhere no limit)."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.armed = False
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if self.seconds and hasattr(signal, "setitimer") and \
+                threading.current_thread() is threading.main_thread():
+            def handler(*_):
+                raise _Timeout()
+            self.old = signal.signal(signal.SIGALRM, handler)
+            signal.setitimer(signal.ITIMER_REAL, self.seconds)
+            self.armed = True
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self.armed:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, self.old)
+        return False
+
+
+def _check_combo(rec, bsdf, values, WI_E, WO_E, WI_S, U_S, WI_A, UA, albedo_wi,
+                 albedo_samples, z_crit):
+    """Evaluate, sample and test the albedo of one BSDF; counts go into rec."""
     try:
-        return bsdf.sample(wi, u[..., :3])
-    except (IndexError, ValueError):
-        return bsdf.sample(wi, u)
+        f = bsdf.eval(WI_E, WO_E)
+    except NotImplementedError as exc:
+        rec.unsupported += 1
+        _note(rec, "eval not implemented (not counted)", values, str(exc), limit=3)
+        f = None
+    if f is not None:
+        if hasattr(bsdf, "eval_cos"):
+            fc = bsdf.eval_cos(WI_E, WO_E)
+        else:
+            fc = np.asarray(f, float) * np.abs(WO_E[:, 2])[:, None]
+        where_e = lambda i: f"wi={WI_E[i].tolist()} wo={WO_E[i].tolist()}"  # noqa: E731
+        _count(rec, "eval", f, values, "eval", where_e)
+        _count(rec, "eval_cos", fc, values, "eval", where_e)
+        rec.eval_cases += len(WI_E)
+    wo, weight, pdf = _sample(bsdf, WI_S, U_S)
+    where_s = lambda i: f"wi={WI_S[i].tolist()} u={U_S[i].tolist()}"  # noqa: E731
+    _count(rec, "weight", weight, values, "sample", where_s)
+    _count(rec, "pdf", pdf, values, "sample", where_s)
+    _count(rec, "wo", wo, values, "sample", where_s, signed=True)
+    wo = np.asarray(wo, dtype=float)
+    live = np.asarray(weight, float).reshape(len(wo), -1).max(1) > 0
+    bad_len = live & ~(np.abs(np.linalg.norm(wo, axis=-1) - 1.0) < 1e-6)
+    if bad_len.any():
+        rec.non_unit += int(bad_len.sum())
+        i = int(np.argmax(bad_len))
+        _note(rec, "non-unit wo", values, where_s(i) + f" -> {wo[i]}")
+    rec.sample_cases += len(WI_S)
+    # Energy: MC albedo (sample weights of the sampled lobes + analytic diffuse).
+    _, wa, _ = _sample(bsdf, WI_A, UA)
+    wa = np.nan_to_num(np.asarray(wa, float), nan=0.0, posinf=0.0)
+    mean = wa.mean(1)
+    se = wa.std(1, ddof=1) / math.sqrt(albedo_samples)
+    diffuse = np.asarray(getattr(bsdf, "diffuse_albedo", 0.0), dtype=float)
+    albedo = mean + diffuse
+    rec.max_albedo = max(rec.max_albedo, float(albedo.max()))
+    over = albedo - 1.0 > z_crit * se + 1e-9
+    rec.albedo_tests += len(albedo_wi)
+    if over.any():
+        rows = np.nonzero(over.any(1))[0]
+        rec.energy += len(rows)
+        r = int(rows[0])
+        _note(rec, "energy", values, f"wi={albedo_wi[r].tolist()} albedo={albedo[r]} "
+              f"stderr={se[r]}")
 
 
 def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride: int = 1,
                 models=None, roughness=None, progress=None, seed: int = 0,
-                factory=None) -> dict:
+                factory=None, combo_seconds: float = 20.0, model_seconds: float = 240.0) -> dict:
     """The sweep over every catalog model (or `models`). Returns {model_id: ModelSweep} plus
     '_total' (a ModelSweep summing all) and '_z_crit' (the energy threshold in std errors).
-    `factory(model_id, values)` builds the BSDF (default: the numpy reference's make_bsdf)."""
+    `factory(model_id, values)` builds the BSDF (default: the numpy reference's make_bsdf).
+    A combination taking over `combo_seconds` is stopped and listed (a stiff input that is
+    slow); a model stops after `model_seconds` (the combinations left out are counted)."""
     from .reference import make_bsdf
 
     make_bsdf = factory or make_bsdf
@@ -229,12 +322,12 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
     wos = [outgoing_directions(w, rng) for w in wis]
     WI_E = np.concatenate([np.repeat(wis[i][None], len(wos[i]), 0) for i in range(len(wis))])
     WO_E = np.concatenate(wos)
-    U = uniforms(4, rng)
+    U = uniforms(U_DIMS, rng)
     WI_S = np.repeat(wis, len(U), 0)
     U_S = np.tile(U, (len(wis), 1))
     # Albedo: incidences where it is well defined (wi.z > 0), stratified-free plain MC.
     albedo_wi = wis[[0, 2, 3, 4, 5, 6, 8]]
-    UA = rng.random((len(albedo_wi), albedo_samples, 4))
+    UA = rng.random((len(albedo_wi), albedo_samples, U_DIMS))
     WI_A = np.repeat(albedo_wi[:, None], albedo_samples, 1)
 
     plan = {}
@@ -256,50 +349,29 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
             out[model_id] = rec
             continue
         for ci, values in enumerate(combos):
+            if time.perf_counter() - start > model_seconds:
+                rec.budget_stop = len(combos) - ci
+                break
             if progress and ci % 500 == 0:
                 progress(f"numpy sweep {model_id}: combination {ci + 1}/{len(combos)}")
             bsdf = make_bsdf(model_id, values)
             rec.combos += 1
             with np.errstate(all="ignore"):
-                f = bsdf.eval(WI_E, WO_E)
-                fc = bsdf.eval_cos(WI_E, WO_E)
-                where_e = lambda i: f"wi={WI_E[i].tolist()} wo={WO_E[i].tolist()}"  # noqa: E731
-                _count(rec, "eval", f, values, "eval", where_e)
-                _count(rec, "eval_cos", fc, values, "eval", where_e)
-                rec.eval_cases += len(WI_E)
-                wo, weight, pdf = _sample(bsdf, WI_S, U_S)
-                where_s = lambda i: f"wi={WI_S[i].tolist()} u={U_S[i].tolist()}"  # noqa: E731
-                _count(rec, "weight", weight, values, "sample", where_s)
-                _count(rec, "pdf", pdf, values, "sample", where_s)
-                _count(rec, "wo", wo, values, "sample", where_s, signed=True)
-                wo = np.asarray(wo, dtype=float)
-                live = np.asarray(weight, float).reshape(len(wo), -1).max(1) > 0
-                bad_len = live & ~(np.abs(np.linalg.norm(wo, axis=-1) - 1.0) < 1e-6)
-                if bad_len.any():
-                    rec.non_unit += int(bad_len.sum())
-                    i = int(np.argmax(bad_len))
-                    _note(rec, "non-unit wo", values, where_s(i) + f" -> {wo[i]}")
-                rec.sample_cases += len(WI_S)
-                # Energy: MC albedo (sample weights of the sampled lobes + analytic diffuse).
-                _, wa, _ = _sample(bsdf, WI_A, UA)
-                wa = np.nan_to_num(np.asarray(wa, float), nan=0.0, posinf=0.0)
-                mean = wa.mean(1)
-                se = wa.std(1, ddof=1) / math.sqrt(albedo_samples)
-                diffuse = np.asarray(getattr(bsdf, "diffuse_albedo", 0.0), dtype=float)
-                albedo = mean + diffuse
-                rec.max_albedo = max(rec.max_albedo, float(albedo.max()))
-                over = albedo - 1.0 > z_crit * se + 1e-9
-                rec.albedo_tests += len(albedo_wi)
-                if over.any():
-                    rows = np.nonzero(over.any(1))[0]
-                    rec.energy += len(rows)
-                    r = int(rows[0])
-                    _note(rec, "energy", values, f"wi={albedo_wi[r].tolist()} albedo={albedo[r]} "
-                          f"stderr={se[r]}")
+                try:
+                    with _time_limit(combo_seconds):
+                        _check_combo(rec, bsdf, values, WI_E, WO_E, WI_S, U_S, WI_A, UA,
+                                     albedo_wi, albedo_samples, z_crit)
+                except _Timeout:
+                    rec.timeouts += 1
+                    _note(rec, f"slower than {combo_seconds:g} s (stopped)", values, "")
+                except Exception as exc:  # noqa: BLE001 - an exception is a finding too
+                    rec.errors += 1
+                    _note(rec, "exception", values, f"{type(exc).__name__}: {exc}")
         rec.seconds = time.perf_counter() - start
         out[model_id] = rec
         for name in ("combos", "eval_cases", "sample_cases", "albedo_tests", "nan", "inf",
-                     "negative", "non_unit", "energy"):
+                     "negative", "non_unit", "energy", "errors", "unsupported", "timeouts",
+                     "budget_stop"):
             setattr(total, name, getattr(total, name) + getattr(rec, name))
         total.max_albedo = max(total.max_albedo, rec.max_albedo)
         total.examples += rec.examples

@@ -18,7 +18,8 @@ from addon.catalog import MODELS
 
 @pytest.fixture(scope="module")
 def sweep():
-    return stability.numpy_sweep(stride=25, albedo_samples=256)
+    return stability.numpy_sweep(stride=25, albedo_samples=256, combo_seconds=3.0,
+                                 model_seconds=8.0)
 
 
 def test_sweep_covers_every_model_and_enough_cases(sweep):
@@ -37,7 +38,8 @@ def test_sweep_covers_every_model_and_enough_cases(sweep):
 
 def test_numpy_sweep_has_no_nan_inf_negative_or_energy_gain(sweep):
     tot = sweep["_total"]
-    counts = {k: getattr(tot, k) for k in ("nan", "inf", "negative", "non_unit", "energy")}
+    counts = {k: getattr(tot, k) for k in ("nan", "inf", "negative", "non_unit", "energy",
+                                          "errors")}
     assert not any(counts.values()), f"{counts}:\n" + "\n".join(tot.examples)
 
 
