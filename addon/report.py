@@ -145,7 +145,35 @@ def reference_available(model_id: str) -> str:
         make_bsdf(model_id, {})
     except Exception as exc:  # noqa: BLE001
         return f"no numpy reference yet ({type(exc).__name__}: {exc})"
+    # The reference image needs the moment tables: probe them cheaply, with a time limit.
+    from .reference.quadrature import tabulate_moments
+
+    try:
+        with stability._time_limit(5.0):
+            tabulate_moments(make_bsdf(model_id, {"roughness": 0.5}), n_mu=4, order=2)
+    except stability._Timeout:
+        return "its reference moment tables are too slow for the report (probe > 5 s)"
+    except Exception as exc:  # noqa: BLE001
+        return f"no reference moment tables ({type(exc).__name__}: {exc})"
     return ""
+
+
+def eval_is_fast(model_id: str, values: dict, limit: float = 0.5) -> bool:
+    """Whether 20,000 evaluations take under `limit` seconds (the sun term needs millions)."""
+    from .reference import make_bsdf
+
+    rng = np.random.default_rng(0)
+    wi = np.broadcast_to([0.6, 0.0, 0.8], (20000, 3))
+    wo = rng.normal(size=(20000, 3))
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    start = time.perf_counter()
+    try:
+        with stability._time_limit(limit * 4):
+            with np.errstate(all="ignore"):
+                make_bsdf(model_id, {**values, "roughness": 1.0}).eval(wi, wo)
+    except Exception:  # noqa: BLE001 - a timeout or an error: not fast
+        return False
+    return time.perf_counter() - start < limit
 
 
 def build_rows(notes: list) -> list:
@@ -384,10 +412,25 @@ def relative_rmse(image, reference, sel) -> float:
 def convergence(cfg, rows, tables, progress, sun_cal=None) -> dict:
     from . import harness
 
-    out = {"envs": {}, "setup_seconds": {}, "sun_quadrature_error": {}}
-    n_total = len(cfg.envs) * len(rows) * len(cfg.samples)
+    out = {"envs": {}, "setup_seconds": {}, "sun_quadrature_error": {}, "left_out": {}}
+    all_rows = rows
+    fast = {}
+    for row in all_rows:
+        model_id, values = ((row.model_id, row.values) if row.model_id
+                            else NATIVE_TWIN[row.native_kind])
+        if model_id not in fast:
+            fast[model_id] = eval_is_fast(model_id, values)
+    env_rows = {e: [r for r in all_rows if e != "sun" or fast[r.model_id or
+                                                             NATIVE_TWIN[r.native_kind][0]]]
+                for e in cfg.envs}
+    for e, rs in env_rows.items():
+        left = [r.key for r in all_rows if r not in rs]
+        if left:
+            out["left_out"][e] = left
+    n_total = sum(len(rs) for rs in env_rows.values()) * len(cfg.samples)
     done = 0
     for env_key in cfg.envs:
+        rows = env_rows[env_key]
         progress(f"{env_key}: building the scene ({len(rows)} rows x {len(cfg.roughness)} spheres)")
         t0 = time.perf_counter()
         scene, layout = build_env_scene(rows, cfg, env_key)
@@ -445,9 +488,10 @@ def time_table(conv, rows) -> list:
     """Per env and row: time to TARGET and its ratio to the native closure of the variant."""
     table = []
     for env_key, data in conv["envs"].items():
-        times = {row.key: time_to_target(data["series"][row.key]) for row in rows}
-        native = {row.variant: times[row.key][0] for row in rows if row.sampler == "native"}
-        for row in rows:
+        env_rows = [row for row in rows if row.key in data["series"]]
+        times = {row.key: time_to_target(data["series"][row.key]) for row in env_rows}
+        native = {row.variant: times[row.key][0] for row in env_rows if row.sampler == "native"}
+        for row in env_rows:
             t, how = times[row.key]
             nat = native.get(row.variant)
             ratio = t / nat if nat and math.isfinite(t) and math.isfinite(nat) else None
@@ -666,14 +710,16 @@ def plot_convergence(conv, rows, path, dpi=72):
     for ax, env_key in zip(axes[0], envs):
         series = conv["envs"][env_key]["series"]
         for row in rows:
+            if row.key not in series:
+                continue
             pts = np.array(series[row.key], float)
             native = row.sampler == "native"
             ax.loglog(np.maximum(pts[:, 1], 1e-4), pts[:, 2], SAMPLER_STYLE.get(row.sampler, "-"),
                       color="k" if native and False else colors[row.variant],
                       lw=2.6 if native else 1.2, marker="o" if native else ".", ms=3,
                       label=f"{row.variant} / {row.sampler}")
-        t = np.array([p[1] for row in rows for p in series[row.key]])
-        e = np.array([p[2] for row in rows for p in series[row.key]])
+        t = np.array([p[1] for pts in series.values() for p in pts])
+        e = np.array([p[2] for pts in series.values() for p in pts])
         t0, e0 = np.median(t), np.median(e) * 2.5
         tt = np.array([t.min(), t.max()]) if t.min() > 0 else np.array([1e-3, t.max()])
         ax.loglog(tt, e0 * np.sqrt(t0 / tt), color="0.4", lw=1, ls="-.", label="slope 1/sqrt(t)")
@@ -823,7 +869,10 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
         for row in rows:
             cells = []
             for e in envs:
-                t = by[(e, row.key)]
+                t = by.get((e, row.key))
+                if t is None:
+                    cells += ["not run", "-"]
+                    continue
                 cells.append(_fmt_t(t["seconds"], t["how"]))
                 cells.append("-" if row.sampler == "native" else
                              (f"{t['ratio']:.2g}" if t["ratio"] is not None else "n/a"))
@@ -837,8 +886,12 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
         a("| model variant / sampler | " + " | ".join(envs) + " |")
         a("|---|" + "---|" * len(envs))
         for row in rows:
-            a(f"| {row.key} | " + " | ".join(f"{by[(e, row.key)]['final_rmse']:.4f}" for e in envs) + " |")
+            a(f"| {row.key} | " + " | ".join(f"{by[(e, row.key)]['final_rmse']:.4f}"
+                                            if (e, row.key) in by else "not run" for e in envs) + " |")
         a("")
+        for e, left in conv.get("left_out", {}).items():
+            a(f"Not run under {e}: {', '.join(left)} (numpy eval too slow for the sun-disk "
+              "quadrature of every pixel).\n")
         a(f"Renders at {cfg.samples[-1]} samples and references: ![grids](grids.png)\n")
     if study:
         a("## 2. The samplers: D cos against visible normals against V-cavity visible normals\n")
