@@ -52,7 +52,12 @@ def save_picture(path, labels, alphas, layout, image, means):
     ax_img.set_xticklabels([f"alpha {a:g}" for a in alphas])
     ax_img.set_yticks([(r + 0.5) * layout.cell_px for r in range(len(labels))])
     ax_img.set_yticklabels(labels)
-    ax_img.set_title("White furnace (L = 1), linear")
+    ax_img.set_title("White furnace (L = 1), linear: an invisible sphere keeps all energy")
+    from matplotlib.patches import Circle
+    scale = max(layout.width, layout.height) / layout.ortho_scale  # pixels per world unit
+    for x, y in layout.centers():
+        ax_img.add_patch(Circle((layout.width / 2 + x * scale - 0.5, layout.height / 2 - y * scale - 0.5),
+                                layout.radius * scale, fill=False, lw=0.6, ls=":", color="tab:blue"))
     for label in labels:
         ax_plot.plot(alphas, means[label], marker="o", label=label)
     ax_plot.axhline(1.0, color="k", lw=0.6)
