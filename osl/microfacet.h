@@ -67,21 +67,25 @@ int refract_about(vector wi, vector m, float eta, output vector wt)
 // steep microfacet into a wrong direction. Every normal in the plane of wi and wo refracts wi
 // into wo for a suitable ratio: m' = -normalize(wi + eta' wo) (Walter 2007 eq. 16). Return the
 // first m' (eta' = eta, then 2, 4, 8, ...) that Cycles leaves alone, in world space, so the lobe
-// points exactly along wo. Arguments in world space; the threshold is Cycles'.
+// points exactly along wo. m' is oriented toward wi (for eta' < 1, wi + eta' wo points along
+// the facet normal, for eta' > 1 against it). Arguments in world space; Cycles' threshold.
 normal refraction_closure_normal(vector wi, vector wo, float eta, output float eta_closure)
 {
     float threshold = min(0.9 * dot(wi, Ng), 0.01) + 1e-4;
     float e = eta;
     for (int i = 0; i < 12; ++i) {
-        vector m = -normalize(wi + e * wo);
-        if (dot(wi, m) > 0.0 && dot(wo, m) < 0.0 && dot(reflect_about(wi, m), Ng) >= threshold) {
+        vector m = normalize(wi + e * wo);
+        if (dot(wi, m) < 0.0)
+            m = -m;
+        if (dot(wo, m) < 0.0 && dot(reflect_about(wi, m), Ng) >= threshold) {
             eta_closure = e;
             return m;
         }
         e = (i == 0) ? max(2.0 * e, 2.0) : 2.0 * e;
     }
     eta_closure = eta;
-    return -normalize(wi + eta * wo);
+    vector m = normalize(wi + eta * wo);
+    return (dot(wi, m) < 0.0) ? -m : m;
 }
 
 float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
@@ -113,6 +117,8 @@ float fresnel_conductor(float cos_i, float n, float k)
     float a = sqrt(max(0.5 * (a2b2 + t0), 0.0));
     float t1 = a2b2 + c2;
     float t2 = 2.0 * a * c;
+    if (t1 + t2 <= 0.0)
+        return 1.0;  // grazing on an index-matched medium: 0/0, take the grazing limit (twin)
     float rs = (t1 - t2) / (t1 + t2);
     float t3 = c2 * a2b2 + s2 * s2;
     float t4 = t2 * s2;

@@ -27,7 +27,7 @@ def f0(n, k):
 
 def test_at_least_twelve_presets_over_every_catalog_model_kind():
     assert len(ALL) >= 12
-    assert {p.model_id for p in ALL.values()} == set(MODELS) & {"cook_torrance", "walter_reflection"}
+    assert {p.model_id for p in ALL.values()} == set(MODELS) & {"cook_torrance", "walter_reflection", "lee_vgroove"}
     categories = {p.category for p in ALL.values()}
     assert {"metal", "plastic", "coating"} <= categories
 

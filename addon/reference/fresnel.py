@@ -39,6 +39,9 @@ def fresnel_conductor(cos_i, n, k):
     eta = np.asarray(n, dtype=float) + 1j * np.asarray(k, dtype=float)
     sin2 = 1.0 - c * c
     cos_t = np.sqrt(1.0 - sin2 / (eta * eta))
-    r_s = (c - eta * cos_t) / (c + eta * cos_t)
-    r_p = (eta * c - cos_t) / (eta * c + cos_t)
+    # At exact grazing incidence on an index-matched medium (n = 1, k = 0) both ratios are 0/0;
+    # take the grazing limit of every other medium, |r| = 1 (same guard in the OSL twin).
+    ds, dp = c + eta * cos_t, eta * c + cos_t
+    r_s = np.where(ds == 0, 1.0, (c - eta * cos_t) / np.where(ds == 0, 1.0, ds))
+    r_p = np.where(dp == 0, 1.0, (eta * c - cos_t) / np.where(dp == 0, 1.0, dp))
     return 0.5 * (np.abs(r_s) ** 2 + np.abs(r_p) ** 2)

@@ -409,7 +409,9 @@ def eval(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None):
             s = np.sin(ts)[:, None] * t[on] + np.cos(ts)[:, None] * n3[on]
             D = mf.D(s)
             wis = rho[on] * np.cos(theta_i[on] - ts)
-            jac = np.sin(ts) / (2.0 * k * np.maximum(hh[on], 1e-300))
+            # |(wi + wo).t| -> 0 is an integrable singularity of the Jacobian; the floor keeps
+            # eval finite on that measure-zero set (the sampler, and the OSL twin, never eval).
+            jac = np.sin(ts) / (2.0 * k * np.maximum(hh[on], 1e-12))
             F = fresnel_product(fresnel, rho[on], theta_i[on] + 0.5 * tv[on], tv[on],
                                 np.full(on.sum(), float(k)), k)
             val = D * wis * G[on] * jac / (wi[on, 2] * wo[on, 2])
