@@ -66,7 +66,8 @@ class MicrofacetBRDF:
         G = self.mf.G2(wi, wo, h, self.masking)
         denom = 4.0 * np.where(valid, wi[..., 2] * wo[..., 2], 1.0)
         scalar = np.where(valid, D * G / denom, 0.0)
-        return self.tint * self.F(dot(wi, h)) * scalar[..., None]
+        # wo = -wi has no half vector: mask the whole product, not only the scalar factor.
+        return np.where(valid[..., None], self.tint * self.F(dot(wi, h)) * scalar[..., None], 0.0)
 
     def eval(self, wi, wo):
         """f(wi, wo) (..., 3): specular + Lambertian diffuse_albedo / pi; 0 below the horizon."""
@@ -157,6 +158,13 @@ def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
             Microfacet(params["distribution"], ax, ay), masking=params["masking"],
             sampler=params["sampler"], fresnel=params["fresnel_type"], ior=params["ior"],
             n=params["n"], k=params["k"], tint=params["base_color"])
+    if model_id == "walter_glass":
+        # Walter et al. 2007 eqs. 20-21, reflection plus transmission (addon/reference/glass.py).
+        from .glass import MicrofacetGlass
+        ax, ay = alphas(params["roughness"])
+        return MicrofacetGlass(
+            Microfacet(params["distribution"], ax, ay), masking=params["masking"],
+            sampler=params["sampler"], ior=params["ior"], tint=params["base_color"])
     if model_id == "lee_vgroove":
         # Lee et al. 2018 (addon/reference/lee.py): kaleidoscopic multi-bounce V-grooves.
         from .lee import LeeBRDF
