@@ -426,35 +426,9 @@ def linked_material(model_id: str, values: dict, name: str):
     from Value / Combine XYZ nodes, so that the OSL clamps are what is tested (enums are set on
     the group's sockets)."""
     def make():
-        import bpy
+        from . import harness
 
-        from . import nodes
-
-        model = MODELS[model_id]
-        material = bpy.data.materials.new(name)
-        tree = material.node_tree
-        for node in list(tree.nodes):
-            tree.nodes.remove(node)
-        output = tree.nodes.new("ShaderNodeOutputMaterial")
-        enums = {k: v for k, v in values.items() if model.param(k).kind == ENUM}
-        group = nodes.add_group_node(tree, model_id, enums)
-        for key, value in values.items():
-            param = model.param(key)
-            if param.kind == ENUM:
-                continue
-            if param.kind == COLOR:
-                combine = tree.nodes.new("ShaderNodeCombineXYZ")
-                for i, channel in enumerate(value):
-                    source = tree.nodes.new("ShaderNodeValue")
-                    source.outputs[0].default_value = channel
-                    tree.links.new(source.outputs[0], combine.inputs[i])
-                tree.links.new(combine.outputs[0], group.inputs[param.label])
-            else:
-                source = tree.nodes.new("ShaderNodeValue")
-                source.outputs[0].default_value = value
-                tree.links.new(source.outputs[0], group.inputs[param.label])
-        tree.links.new(group.outputs["BSDF"], output.inputs["Surface"])
-        return material
+        return harness.linked_model_material(model_id, values, name)
     return make
 
 
