@@ -27,7 +27,7 @@ def f0(n, k):
 
 def test_at_least_twelve_presets_over_every_catalog_model_kind():
     assert len(ALL) >= 12
-    assert {p.model_id for p in ALL.values()} == set(MODELS) & {"cook_torrance", "walter_reflection", "lee_vgroove"}
+    assert {p.model_id for p in ALL.values()} == set(MODELS)  # every model has presets
     categories = {p.category for p in ALL.values()}
     assert {"metal", "plastic", "coating"} <= categories
 
@@ -40,8 +40,8 @@ def test_every_preset_cites_its_optical_constants(preset_id):
     if {"n", "k"} & set(p.params):
         assert p.params["fresnel_type"] == "conductor"
         assert p.source["wavelengths_nm"] == [650, 550, 450]
-    if "ior" in p.params:
-        assert p.params["fresnel_type"] == "dielectric"
+    if "ior" in p.params:  # glass has no Fresnel switch: it is a dielectric by model
+        assert p.params.get("fresnel_type", "dielectric") == "dielectric"
         assert 1.0 < p.params["ior"] < 3.0
     # Validated values pass through the catalog's clamp unchanged.
     resolved = p.resolved()
