@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from . import grid, stability
-from .catalog import MODELS, alphas
+from .catalog import MODELS
+from .native import native_source
 
 TARGET = 0.01  # relative RMSE for the time-to-target table
 MU_MIN_RMSE = 0.05  # the rim beyond is left out of the RMSE (see grid.MU_BANDS)
@@ -123,16 +124,6 @@ VARIANTS = {
     ],
     "walter_glass": [("Walter GGX glass 1.5", {"distribution": "ggx", "ior": 1.5}, "glass")],
 }
-GOLD_N = MODELS["walter_reflection"].param("n").default
-GOLD_K = MODELS["walter_reflection"].param("k").default
-NATIVE = {
-    "ggx": 'BSDF = microfacet("ggx", N, {alpha:.9g}, 0.0, 0);',
-    "beckmann": 'BSDF = microfacet("beckmann", N, {alpha:.9g}, 0.0, 0);',
-    "conductor": ('BSDF = conductor_bsdf(N, vector(0), {alpha:.9g}, {alpha:.9g}, '
-                  'color({n[0]}, {n[1]}, {n[2]}), color({k[0]}, {k[1]}, {k[2]}), "ggx");'),
-    "glass": ('BSDF = dielectric_bsdf(N, vector(0), color(1), color(1), {alpha:.9g}, {alpha:.9g}, '
-              '1.5, "ggx");'),
-}
 
 
 def reference_available(model_id: str) -> str:
@@ -193,11 +184,6 @@ def build_rows(notes: list) -> list:
             if native:
                 rows.append(Row(f"{label} / native", label, None, {}, label, "native", native))
     return rows
-
-
-def native_source(kind: str, roughness: float) -> str:
-    body = NATIVE[kind].format(alpha=alphas(roughness)[0], n=GOLD_N, k=GOLD_K)
-    return f'#include "stdcycles.h"\nshader native(output closure color BSDF = 0) {{ {body} }}'
 
 
 def specs_for(row: Row, roughness) -> list:

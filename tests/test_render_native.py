@@ -17,21 +17,13 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness  # noqa: E402
-from addon.catalog import MODELS, alphas  # noqa: E402
+from addon import grid, harness, native  # noqa: E402
 from addon.grid import GRADIENT, WHITE, SphereSpec  # noqa: E402
 
 ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
 SAMPLES = 256
-GOLD_N = MODELS["walter_reflection"].param("n").default
-GOLD_K = MODELS["walter_reflection"].param("k").default
-
-NATIVE = {
-    "ggx": 'BSDF = microfacet("ggx", N, {alpha:.9g}, 0.0, 0);',
-    "beckmann": 'BSDF = microfacet("beckmann", N, {alpha:.9g}, 0.0, 0);',
-    "conductor": ('BSDF = conductor_bsdf(N, vector(0), {alpha:.9g}, {alpha:.9g}, '
-                  'color({n[0]}, {n[1]}, {n[2]}), color({k[0]}, {k[1]}, {k[2]}), "ggx");'),
-}
+# Cycles' closures, from the one list the report uses too (glass: tests/test_render_glass.py).
+NATIVE = {k: v for k, v in native.NATIVE.items() if k != "glass"}
 OURS = {
     "ggx": {"distribution": "ggx", "fresnel_type": "none"},
     "beckmann": {"distribution": "beckmann", "fresnel_type": "none"},
@@ -40,9 +32,7 @@ OURS = {
 
 
 def native_material(kind, roughness):
-    alpha = alphas(roughness)[0]
-    body = NATIVE[kind].format(alpha=alpha, n=GOLD_N, k=GOLD_K)
-    source = f'#include "stdcycles.h"\nshader native(output closure color BSDF = 0) {{ {body} }}'
+    source = native.native_source(kind, roughness)
     return lambda: harness.osl_material(source, f"native {kind} {roughness}")
 
 
