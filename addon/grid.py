@@ -193,22 +193,25 @@ class SphereSpec:
     label: str = ""
 
 
+_TABLES: dict = {}  # (model, values) -> moment table, for the process
+
+
 def reference_tables(specs: list) -> list:
     """Tabulated BSDF moments for each sphere (None for a gap), by converged quadrature of the
-    model's evaluation formula (addon/reference/quadrature.py)."""
+    model's evaluation formula (addon/reference/quadrature.py), computed once per process for
+    each model and set of values (glass tables take seconds)."""
     from .reference import make_bsdf
     from .reference.quadrature import tabulate_moments
 
-    cache = {}
     tables = []
     for spec in specs:
         if spec is None:
             tables.append(None)
             continue
-        key = (spec.model_id, tuple(sorted((k, str(v)) for k, v in spec.values.items())))
-        if key not in cache:
-            cache[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
-        tables.append(cache[key])
+        key = (spec.model_id, tuple(sorted((k, repr(v)) for k, v in spec.values.items())))
+        if key not in _TABLES:
+            _TABLES[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
+        tables.append(_TABLES[key])
     return tables
 
 

@@ -65,15 +65,20 @@ int refract_about(vector wi, vector m, float eta, output vector wt)
 // Cycles bends a closure normal whose mirror reflection of wi would dip below the geometric
 // surface (ensure_valid_specular_reflection), which would turn a refraction lobe through a
 // steep microfacet into a wrong direction. Every normal in the plane of wi and wo refracts wi
-// into wo for a suitable ratio: m' = -normalize(wi + eta' wo) (Walter 2007 eq. 16). Return the
-// first m' (eta' = eta, then 2, 4, 8, ...) that Cycles leaves alone, in world space, so the lobe
-// points exactly along wo. m' is oriented toward wi (for eta' < 1, wi + eta' wo points along
-// the facet normal, for eta' > 1 against it). Arguments in world space; Cycles' threshold.
+// into wo for a suitable ratio eta': m' = +-normalize(wi + eta' wo) (Walter 2007 eq. 16),
+// oriented toward wi. Return the first m' that Cycles leaves alone, in world space, so the
+// lobe points exactly along wo: eta' = eta, else eta' = c/2, c/4, ... with c = -wi.wo > 0
+// (a real refraction has wi.wo < 0). For eta' < c the pair is a valid refraction (wo.m' < 0,
+// no total internal reflection: Snell holds by construction), and as eta' -> 0, m' -> wi,
+// whose mirror reflection is wi itself, which Cycles always accepts; the first halving
+// usually does. (Doubling eta' instead, tried first, left 12% of the samples bent at eta 3,
+// alpha 1: a 3% error in the gradient.) Arguments in world space; Cycles' threshold.
 normal refraction_closure_normal(vector wi, vector wo, float eta, output float eta_closure)
 {
     float threshold = min(0.9 * dot(wi, Ng), 0.01) + 1e-4;
+    float c = -dot(wi, wo);
     float e = eta;
-    for (int i = 0; i < 12; ++i) {
+    for (int i = 0; i < 24; ++i) {
         vector m = normalize(wi + e * wo);
         if (dot(wi, m) < 0.0)
             m = -m;
@@ -81,7 +86,7 @@ normal refraction_closure_normal(vector wi, vector wo, float eta, output float e
             eta_closure = e;
             return m;
         }
-        e = (i == 0) ? max(2.0 * e, 2.0) : 2.0 * e;
+        e = (i == 0) ? 0.5 * c : 0.5 * e;
     }
     eta_closure = eta;
     vector m = normalize(wi + eta * wo);
