@@ -200,6 +200,7 @@ def reference_tables(specs: list) -> list:
     """Tabulated BSDF moments for each sphere (None for a gap), by converged quadrature of the
     model's evaluation formula (addon/reference/quadrature.py), computed once per process for
     each model and set of values (glass tables take seconds)."""
+    from .catalog import MODELS
     from .reference import make_bsdf
     from .reference.quadrature import tabulate_moments
 
@@ -208,7 +209,11 @@ def reference_tables(specs: list) -> list:
         if spec is None:
             tables.append(None)
             continue
-        key = (spec.model_id, tuple(sorted((k, repr(v)) for k, v in spec.values.items())))
+        # Keyed by the resolved values (defaults filled in, clamped); the sampler does not
+        # change the BSDF.
+        values = MODELS[spec.model_id].resolve(spec.values)
+        key = (spec.model_id, tuple(sorted((k, repr(v)) for k, v in values.items()
+                                           if k != "sampler")))
         if key not in _TABLES:
             _TABLES[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
         tables.append(_TABLES[key])

@@ -6,10 +6,11 @@ import time
 import numpy as np
 import pytest
 
+from addon import grid
 from addon.catalog import alphas
 from addon.reference import make_bsdf
 from addon.reference.fresnel import fresnel_dielectric
-from addon.reference.quadrature import directional_moments, moments_at, tabulate_moments
+from addon.reference.quadrature import directional_moments, moments_at
 
 MU = np.concatenate([[0.02, 0.035, 0.05, 0.075], np.linspace(0.1, 1.0, 10)])
 # Roughness r with alpha = r^2 in {0.0025, 0.09, 0.49, 1}.
@@ -109,7 +110,8 @@ def test_table_interpolation(model_id, values):
     that stops early, or a broken non-uniform interpolation."""
     bsdf = make_bsdf(model_id, values)
     start = time.perf_counter()
-    table = tabulate_moments(bsdf)
+    # The table the render tests use (grid caches it per process; the glass tables take s).
+    table = grid.reference_tables([grid.SphereSpec(model_id, values)])[0]
     seconds = time.perf_counter() - start
     mu = np.concatenate([np.linspace(0.02, 1.0, 67), np.linspace(0.735, 0.755, 41)])
     direct = np.stack(directional_moments(bsdf, mu))
