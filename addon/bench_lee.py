@@ -1,15 +1,18 @@
-"""Measurements for the Lee 2018 V-groove model (numbers for the report; nothing here is asserted
-except through tests/test_render_lee.py, which uses `furnace_means`).
+"""Measurements for the Lee 2018 V-groove model (numbers for the report, `make report`'s section
+"Lee 2018 (V-grooves)"; nothing here is asserted except through tests/test_render_lee.py, which
+uses `furnace_means`, and the report's smoke test).
 
 - `furnace_means` / `render_furnace`: white-furnace sphere grids over alpha for Lee (F = 1),
   single scattering (Walter GGX, height-correlated Smith, F = 1; Cook-Torrance, Beckmann with
   V-cavities, F >= 0.9996 since its catalog entry has no F = 1 option) and Cycles' own
-  multiple-scattering GGX closure (`microfacet_multi_ggx_aniso`).
-- `shader_cost`: render time of the Lee shader against the Cook-Torrance shader at equal
-  samples on the same grid (one run each).
-- `tracer_vs_closed_form`: time for the analytic sampler (lee.sample) and the brute-force tracer
-  (vgroove.trace) to reach the same standard error of the albedo; the deterministic closed-form
-  quadrature (lee.albedo) timed beside them.
+  multiple-scattering GGX closure (`microfacet_multi_ggx_aniso`); `furnace_noise` gives each
+  sphere mean's standard error.
+- `shader_cost`: render time per sample of the Lee shader against the Cook-Torrance shader:
+  one scene holding every shader's row, each row rendered alone through a render border at two
+  sample counts, rows interleaved, the slope taken (scene sync, OSL JIT and the per-render
+  overhead cancel); ratio to Cook-Torrance per repeat.
+- `tracer_vs_closed_form`: time for the closed-form quadrature (lee.albedo), the analytic
+  sampler (lee.sample) and the brute-force tracer (vgroove.trace) to reach the same albedo error.
 - `moments_accuracy`: the default moment rules (lee.MOMENT_NODES) against much finer ones.
 `markdown(results)` formats any of these dicts as a Markdown table. Run them all with
 `python -m addon.bench_lee` (from the repository root, the pinned environment).
@@ -77,48 +80,154 @@ def furnace_means(alphas=FURNACE_ALPHAS, samples: int = 64, cell_px: int = 32, s
     return render_furnace(alphas, samples, cell_px, seed)[3]
 
 
-def shader_cost(samples: int = 128, cell_px: int = 32, repeats: int = 2) -> dict:
-    """Render time of the same 8-sphere grid (gold, roughness 0.05 .. 1) with the Lee shader
-    (symmetric and asymmetric GGX) and the Cook-Torrance shader (specular 1, V-cavity sampler),
-    white furnace, equal samples; best of `repeats`."""
-    from . import grid, harness
-    from .grid import SphereSpec
-
-    rough = (0.05, 0.3, 0.5, 0.7, 0.85, 1.0, 0.2, 0.6)
-    grids = {
-        "cook_torrance": [SphereSpec("cook_torrance", {"specular": 1.0, "roughness": r, **GOLD})
-                          for r in rough],
-        "lee symmetric ggx": [SphereSpec("lee_vgroove", {"roughness": r, **GOLD}) for r in rough],
-        "lee asymmetric ggx": [SphereSpec("lee_vgroove", {"roughness": r, "groove": "asymmetric",
-                                                          **GOLD}) for r in rough],
-        "lee symmetric beckmann": [SphereSpec("lee_vgroove", {"roughness": r,
-                                                              "distribution": "beckmann", **GOLD})
-                                   for r in rough],
-    }
+def furnace_noise(layout, image, labels, alphas) -> dict:
+    """Standard error of each sphere mean of `render_furnace` (pixels with mu >= 0.05, green):
+    the pixels' standard deviation / sqrt(count). An upper bound where the expected value
+    varies over the sphere (single scattering loses more at the rim); exactly 0 for Lee with
+    F = 1, whose every sample weighs 1."""
+    index, _, mu = layout.pixel_geometry()
     out = {}
-    for name, specs in grids.items():
-        out[name] = min(harness.render_specs(specs, grid.WHITE, samples, seed=1, cell_px=cell_px)[2]
-                        for _ in range(repeats))
-    base = out["cook_torrance"]
-    return {name: {"seconds": t, "ratio_to_cook_torrance": t / base} for name, t in out.items()}
+    for r, label in enumerate(labels):
+        out[label] = []
+        for c in range(len(alphas)):
+            v = image[(index == r * len(alphas) + c) & (mu >= 0.05)][:, 1]
+            out[label].append(float(v.std(ddof=1) / math.sqrt(len(v))))
+    return out
 
 
-def tracer_vs_closed_form(cases=(("ggx", 0.5, 60.0), ("ggx", 1.0, 0.0), ("beckmann", 1.0, 80.0)),
-                          groove: str = "symmetric", n: int = 1 << 18, seed: int = 5) -> dict:
-    """Per case: seconds per sample and albedo standard error (G channel, gold) of lee.sample and
-    vgroove.trace, the time each needs for a target standard error of 1e-4, their ratio, and
-    the time of the deterministic closed-form albedo (lee.albedo, n = 512)."""
+COST_ROUGHNESS = (0.05, 0.2, 0.3, 0.5, 0.6, 0.7, 0.85, 1.0)
+
+
+def cost_rows():
+    """(label, model id, values) of the shader-cost grid, gold; Cook-Torrance first (the base)."""
+    return [
+        ("Cook-Torrance (V-cavity sampler)", "cook_torrance", {"specular": 1.0, **GOLD}),
+        ("Lee symmetric GGX", "lee_vgroove", {**GOLD}),
+        ("Lee asymmetric GGX", "lee_vgroove", {"groove": "asymmetric", **GOLD}),
+        ("Lee symmetric Beckmann", "lee_vgroove", {"distribution": "beckmann", **GOLD}),
+    ]
+
+
+def _set_border(scene, rows: int, row: int):
+    r = scene.render
+    r.use_border = True
+    r.use_crop_to_border = False
+    r.border_min_x, r.border_max_x = 0.0, 1.0
+    r.border_max_y = 1.0 - row / rows
+    r.border_min_y = 1.0 - (row + 1) / rows
+
+
+def shader_cost(samples=(16, 144), cell_px: int = 32, repeats: int = 3,
+                roughness=COST_ROUGHNESS, progress=None) -> dict:
+    """Render time per sample of the Lee shader against the Cook-Torrance shader (gold, white
+    furnace, one row of spheres per shader, roughness `roughness`), measured side by side:
+    ONE scene holds every row (persistent data; scene sync and OSL JIT are done once before
+    timing); each row is rendered alone through a render border at the two sample counts
+    `samples`, rows interleaved (order reversed on odd repeats). Seconds per sample of a row =
+    the slope (t(hi) - t(lo)) / (hi - lo), which cancels the per-render overhead (EXR
+    write/read). Everything is taken per repeat (rows rendered moments apart, so a change in
+    the machine's load hits them alike) and summarised by the median over the repeats; the
+    ratio to Cook-Torrance also by its minimum and maximum."""
+    from . import grid, harness
+
+    rows = cost_rows()
+    lo, hi = samples
+    layout = grid.GridLayout(len(rows), len(roughness), cell_px=cell_px)
+    scene = harness.new_scene()
+    mats = [harness.model_material(m, {**v, "roughness": r}, f"{label} r={r}")
+            for label, m, v in rows for r in roughness]
+    harness.build_grid_scene(layout, mats, grid.WHITE, lo, 1)
+    scene.render.use_persistent_data = True
+    t0 = time.perf_counter()
+    harness.render(scene)  # sync + OSL JIT, once
+    setup = time.perf_counter() - t0
+    times = {label: {lo: [], hi: []} for label, _, _ in rows}
+    n_total, done = repeats * len(rows) * 2, 0
+    for rep in range(repeats):
+        order = list(enumerate(rows))
+        if rep % 2:
+            order.reverse()
+        for r, (label, _, _) in order:
+            _set_border(scene, len(rows), r)
+            for spp in (lo, hi):
+                done += 1
+                if progress:
+                    progress(f"Lee shader cost: {label}, {spp} samples", done, n_total)
+                scene.cycles.samples = spp
+                scene.cycles.seed = 1 + rep
+                times[label][spp].append(harness.render(scene)[1])
+    base = rows[0][0]
+
+    def slope(label, rep):
+        t = times[label]
+        return (t[hi][rep] - t[lo][rep]) / (hi - lo)
+
+    out = {}
+    for label, _, _ in rows:
+        slopes = [slope(label, k) for k in range(repeats)]
+        per_rep = [slope(label, k) / slope(base, k) for k in range(repeats)]
+        med = float(np.median(slopes))
+        out[label] = {"ms_per_sample": 1e3 * med,
+                      "ratio_to_cook_torrance": float(np.median(per_rep)),
+                      "ratio_min": min(per_rep), "ratio_max": max(per_rep),
+                      f"seconds_at_{hi}": float(np.median(times[label][hi])),
+                      "overhead_s": float(np.median(times[label][lo])) - lo * med}
+    out["_setup"] = {"setup_seconds": setup, "samples": list(samples), "repeats": repeats,
+                     "spheres_per_row": len(roughness), "cell_px": cell_px,
+                     "roughness": list(roughness)}
+    return out
+
+
+TRACER_CASES = (("ggx", 0.5, 60.0), ("ggx", 1.0, 0.0), ("beckmann", 1.0, 80.0))
+
+
+def _best_time(fn, repeat_below: float = 0.5):
+    """(result, seconds) of fn(); run a second time and the faster kept when under
+    `repeat_below` seconds (short timings are noisy)."""
+    t0 = time.perf_counter()
+    res = fn()
+    t = time.perf_counter() - t0
+    if t < repeat_below:
+        t0 = time.perf_counter()
+        res = fn()
+        t = min(t, time.perf_counter() - t0)
+    return res, t
+
+
+def tracer_vs_closed_form(cases=TRACER_CASES, groove: str = "symmetric", n: int = 1 << 18,
+                          seed: int = 5, target: float = 1e-4,
+                          quad_orders=(32, 64, 128, 256, 512), quad_ref: int = 1024,
+                          progress=None) -> dict:
+    """Time to the same albedo error (G channel, gold), per case (distribution, alpha,
+    incidence in degrees):
+    - closed form: the deterministic quadrature lee.albedo at orders `quad_orders`; its error
+      is |A(order) - A(quad_ref)|; time to `target` = the time of the first order from which
+      every larger one is within it;
+    - analytic sampler (lee.sample) and brute-force tracer (vgroove.trace): n samples each,
+      standard error s in t seconds; time to `target` = t (s / target)^2.
+    Also the agreement of the tracer's mean with the reference quadrature, in standard errors."""
+    from .catalog import MODELS
     from .reference import lee
     from .reference import vgroove as vg
     from .reference.microfacet import Microfacet
 
-    from .catalog import MODELS
     model = MODELS["lee_vgroove"]
     gold = vg.fresnel_fn("conductor", n=model.param("n").default, k=model.param("k").default)
     out = {}
-    for dist, alpha, deg in cases:
+    for i, (dist, alpha, deg) in enumerate(cases):
+        if progress:
+            progress(f"Lee closed form vs tracer: {dist} alpha {alpha} at {deg:g} deg", i + 1,
+                     len(cases))
         mf = Microfacet(dist, alpha)
         wi = np.array([math.sin(math.radians(deg)), 0.0, math.cos(math.radians(deg))])
+        ref = lee.albedo(wi, mf, gold, groove, n=quad_ref)[1]
+        half = lee.albedo(wi, mf, gold, groove, n=quad_ref // 2)[1]
+        quad = []
+        for order in quad_orders:
+            q, tq = _best_time(lambda: lee.albedo(wi, mf, gold, groove, n=order))
+            quad.append((order, tq, abs(float(q[1]) - float(ref))))
+        ok = [k for k in range(len(quad)) if all(e <= target for _, _, e in quad[k:])]
+        q_order, q_time = (quad[ok[0]][0], quad[ok[0]][1]) if ok else (None, float("inf"))
         rng = np.random.default_rng(seed)
         t0 = time.perf_counter()
         m1, s1 = lee.sample_albedo(wi, mf, n, rng, gold, groove)
@@ -127,21 +236,22 @@ def tracer_vs_closed_form(cases=(("ggx", 0.5, 60.0), ("ggx", 1.0, 0.0), ("beckma
         t0 = time.perf_counter()
         m2, s2 = vg.albedo(wi, mf, n, rng, gold, groove, table=table)
         t2 = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        q = lee.albedo(wi, mf, gold, groove)
-        tq = time.perf_counter() - t0
-        target = 1e-4
-        need1 = t1 * (s1[1] / target) ** 2
-        need2 = t2 * (s2[1] / target) ** 2
+        need_sampler = t1 * (s1[1] / target) ** 2
+        need_tracer = t2 * (s2[1] / target) ** 2
         out[f"{groove} {dist} a={alpha} {deg:g} deg"] = {
-            "albedo_G": float(q[1]), "sampler_G": float(m1[1]), "tracer_G": float(m2[1]),
-            "sampler_s_per_1e-4": need1, "tracer_s_per_1e-4": need2,
-            "tracer_over_sampler": need2 / need1, "quadrature_s": tq}
+            "albedo_G": float(ref), "quad_ref_change": abs(float(ref) - float(half)),
+            "closed_form_order": q_order, "closed_form_s": q_time,
+            "sampler_s": need_sampler, "tracer_s": need_tracer,
+            "tracer_over_closed_form": need_tracer / q_time,
+            "tracer_over_sampler": need_tracer / need_sampler,
+            "tracer_G": float(m2[1]), "tracer_z": (float(m2[1]) - float(ref)) / float(s2[1]),
+            "quadrature": [{"order": o, "seconds": t, "error": e} for o, t, e in quad]}
     return out
 
 
-def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01),
-                     alphas=(0.09, 1.0)) -> dict:
+def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01), alphas=(0.09, 1.0),
+                     grooves=("symmetric", "asymmetric"), distributions=("ggx", "beckmann"),
+                     progress=None) -> dict:
     """Max abs difference of (E, Vn, Vt) between the default rules of lee.moments and rules with
     about 8x the nodes (symmetric 384^2 tensor; asymmetric R3 with 8x the points), gold."""
     from .catalog import MODELS
@@ -154,52 +264,64 @@ def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01),
                                           k=model.param("k").default))
     mus = np.asarray(mus)
     out = {}
-    for groove in ("symmetric", "asymmetric"):
-        for dist in ("ggx", "beckmann"):
-            for a in alphas:
-                mf = Microfacet(dist, a)
-                kmax = lee.max_bounces(a, dist, groove)
-                t0 = time.perf_counter()
-                d = np.array(lee.moments(mus, mf, gold, groove, kmax))
-                t = time.perf_counter() - t0
-                nt, nphi, npart = lee.MOMENT_NODES[groove, dist]
-                fine = (384, 384, 1) if groove == "symmetric" else (nt, nphi, 8 * npart)
-                f = np.array(lee.moments(mus, mf, gold, groove, kmax, *fine))
-                out[f"{groove} {dist} a={a}"] = {"max_abs_error": float(np.abs(d - f).max()),
-                                                 "seconds_per_mu": t / len(mus)}
+    todo = [(g, d, a) for g in grooves for d in distributions for a in alphas]
+    for i, (groove, dist, a) in enumerate(todo):
+        if progress:
+            progress(f"Lee moment rules: {groove} {dist} alpha {a}", i + 1, len(todo))
+        mf = Microfacet(dist, a)
+        kmax = lee.max_bounces(a, dist, groove)
+        t0 = time.perf_counter()
+        d = np.array(lee.moments(mus, mf, gold, groove, kmax))
+        t = time.perf_counter() - t0
+        nt, nphi, npart = lee.MOMENT_NODES[groove, dist]
+        fine = (384, 384, 1) if groove == "symmetric" else (nt, nphi, 8 * npart)
+        f = np.array(lee.moments(mus, mf, gold, groove, kmax, *fine))
+        out[f"{groove} {dist} a={a}"] = {"max_abs_error": float(np.abs(d - f).max()),
+                                         "seconds_per_mu": t / len(mus)}
     return out
 
 
 def markdown(results: dict) -> str:
-    """A Markdown table of {row: {column: value}}."""
-    cols = list(next(iter(results.values())).keys())
+    """A Markdown table of {row: {column: value}}; rows whose key starts with '_' (settings)
+    and columns holding lists or dicts are left out."""
+    rows = {k: v for k, v in results.items() if not str(k).startswith("_")}
+    cols = [c for c, v in next(iter(rows.values())).items() if not isinstance(v, (list, dict))]
     lines = ["| case | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
-    for name, row in results.items():
+    for name, row in rows.items():
         cells = []
         for c in cols:
             v = row[c]
-            cells.append(f"{v:.4g}" if isinstance(v, float) else str(v))
+            cells.append("-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v))
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def furnace_markdown(alphas, means: dict) -> str:
+def furnace_markdown(alphas, means: dict, noise: dict | None = None) -> str:
+    """The furnace table; with `noise` (furnace_noise) each mean carries its standard error."""
     lines = ["| model | " + " | ".join(f"alpha {a:g}" for a in alphas) + " |",
              "|---" * (len(alphas) + 1) + "|"]
     for label, values in means.items():
-        lines.append(f"| {label} | " + " | ".join(f"{v:.4f}" for v in values) + " |")
+        cells = [f"{v:.4f}" + (f" ± {noise[label][i]:.1g}" if noise else "")
+                 for i, v in enumerate(values)]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 if __name__ == "__main__":
     import sys
 
+    def _progress(message, i=None, n=None):
+        print(f"[bench_lee] {f'({i}/{n}) ' if i is not None else ''}{message}", file=sys.stderr,
+              flush=True)
+
     what = set(sys.argv[1:]) or {"furnace", "cost", "tracer", "accuracy"}
     if "furnace" in what:
-        print(furnace_markdown(FURNACE_ALPHAS, furnace_means()))
+        labels, layout, image, means = render_furnace()
+        print(furnace_markdown(FURNACE_ALPHAS, means,
+                               furnace_noise(layout, image, labels, FURNACE_ALPHAS)))
     if "cost" in what:
-        print(markdown(shader_cost()))
+        print(markdown(shader_cost(progress=_progress)))
     if "tracer" in what:
-        print(markdown(tracer_vs_closed_form()))
+        print(markdown(tracer_vs_closed_form(progress=_progress)))
     if "accuracy" in what:
-        print(markdown(moments_accuracy()))
+        print(markdown(moments_accuracy(progress=_progress)))

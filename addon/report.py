@@ -14,7 +14,11 @@ Sections (each a function below, orchestrated by `run`):
    and a firefly picture (`fireflies`).
 3. `reference_cost`: time and accuracy of the reference image against quadrature order.
 4. Stability: addon/stability.py (numpy sweep, OSL stress grid).
-5. `optix_comparison`: only where bpy reports an OptiX device (untested without one).
+5. `lee_section`: the Lee 2018 V-groove model (addon/bench_lee.py): white-furnace grid over
+   alpha against single scattering and Cycles' multi-GGX (table and picture), render cost per
+   sample against the Cook-Torrance shader measured side by side, the closed-form albedo
+   against the brute-force tracer at equal error, and the accuracy of the moment rules.
+6. `optix_comparison`: only where bpy reports an OptiX device (untested without one).
 """
 from __future__ import annotations
 
@@ -46,6 +50,25 @@ GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 
 # -- configuration --------------------------------------------------------------------------
 @dataclass
+class LeeConfig:
+    """Settings of the Lee section (defaults: the full run)."""
+    furnace_samples: int = 256
+    furnace_px: int = 48
+    cost_samples: tuple = (16, 384)  # the two sample counts whose time difference is taken
+    cost_px: int = 32
+    cost_repeats: int = 5
+    tracer_n: int = 1 << 20
+    tracer_cases: tuple = (("ggx", 0.5, 60.0), ("ggx", 1.0, 0.0), ("beckmann", 1.0, 80.0))
+    quad_orders: tuple = (32, 64, 128, 256, 512)
+    quad_ref: int = 1024
+    target: float = 1e-4  # albedo error for the time-to-error comparison
+    moment_mus: tuple = (1.0, 0.5, 0.2, 0.05, 0.01)
+    moment_alphas: tuple = (0.09, 1.0)
+    moment_grooves: tuple = ("symmetric", "asymmetric")
+    moment_distributions: tuple = ("ggx", "beckmann")
+
+
+@dataclass
 class Config:
     mode: str
     samples: tuple
@@ -67,6 +90,7 @@ class Config:
     seed: int = 0
     combo_seconds: float = 20.0  # stability sweep: per parameter combination
     model_seconds: float = 240.0  # stability sweep: per model
+    lee: LeeConfig = field(default_factory=LeeConfig)
 
 
 def config(mode: str) -> Config:
@@ -79,11 +103,21 @@ def config(mode: str) -> Config:
         return Config("quick", (1, 4, 16, 64, 256), 16, (0.1, 0.3, 0.6, 1.0),
                       ("white", "gradient", "sun"), 8, 256, "quick", 8000,
                       (0.0, 30.0, 60.0, 80.0, 87.0, 89.0, 89.9), (0.1, 0.3, 1.0), 64,
-                      (2, 4, 6), 10, 16, (16, 32), combo_seconds=5.0, model_seconds=30.0)
+                      (2, 4, 6), 10, 16, (16, 32), combo_seconds=5.0, model_seconds=30.0,
+                      lee=LeeConfig(furnace_samples=64, furnace_px=32, cost_samples=(16, 256),
+                                    cost_px=24, cost_repeats=3, tracer_n=1 << 16,
+                                    quad_orders=(32, 64, 128, 256), quad_ref=512,
+                                    moment_mus=(1.0, 0.2, 0.01)))
     if mode == "smoke":
         return Config("smoke", (1, 8), 10, (0.3, 1.0), ("gradient",), 200, 64, "none", 500,
                       (0.0, 60.0, 89.9), (0.3,), 32, (2,), 4, 8, (8, 16), moment_order=4,
-                      combo_seconds=1.0, model_seconds=3.0)
+                      combo_seconds=1.0, model_seconds=3.0,
+                      lee=LeeConfig(furnace_samples=16, furnace_px=16, cost_samples=(4, 32),
+                                    cost_px=12, cost_repeats=2, tracer_n=1 << 14,
+                                    tracer_cases=(("beckmann", 1.0, 80.0),),
+                                    quad_orders=(32, 64, 128), quad_ref=256,
+                                    moment_mus=(1.0, 0.01), moment_alphas=(1.0,),
+                                    moment_distributions=("ggx",)))
     raise ValueError(f"unknown mode {mode!r}")
 
 
@@ -593,6 +627,113 @@ def reference_cost(cfg, rows, progress) -> list:
     return results
 
 
+# -- section 5: Lee 2018 V-grooves -------------------------------------------------------------
+def lee_section(cfg, progress, notes) -> dict:
+    """The measurements of addon/bench_lee.py at the mode's settings. Each part that fails is
+    reported in `notes` (and left out of the page) rather than losing the run."""
+    from . import bench_lee
+
+    lc = cfg.lee
+    out = {}
+
+    def part(name, fn):
+        start = time.perf_counter()
+        try:
+            out[name] = fn()
+        except Exception as exc:  # noqa: BLE001 - report it rather than lose the page
+            notes.append(f"Lee section, {name}: failed: {type(exc).__name__}: {exc}")
+            progress(f"Lee {name} FAILED: {type(exc).__name__}: {exc}")
+            return
+        out.setdefault("seconds", {})[name] = time.perf_counter() - start
+
+    def furnace():
+        progress(f"Lee furnace grid: {len(bench_lee.furnace_rows())} models x "
+                 f"{len(bench_lee.FURNACE_ALPHAS)} alphas, {lc.furnace_samples} samples")
+        alphas = bench_lee.FURNACE_ALPHAS
+        labels, layout, image, means = bench_lee.render_furnace(alphas, lc.furnace_samples,
+                                                                lc.furnace_px)
+        noise = bench_lee.furnace_noise(layout, image, labels, alphas)
+        lee = means["Lee symmetric GGX"][-1]
+        progress(f"Lee furnace at alpha {alphas[-1]:g}: Lee {lee:.4f}, Walter GGX "
+                 f"{means['Walter GGX (single)'][-1]:.4f}, Cook-Torrance "
+                 f"{means['Cook-Torrance (single)'][-1]:.4f}, Cycles multi-GGX "
+                 f"{means['Cycles multi-GGX'][-1]:.4f}")
+        return {"alphas": list(alphas), "labels": labels, "means": means, "noise": noise,
+                "samples": lc.furnace_samples, "cell_px": lc.furnace_px, "layout": layout,
+                "image": image}
+
+    def cost():
+        res = bench_lee.shader_cost(lc.cost_samples, lc.cost_px, lc.cost_repeats,
+                                    progress=progress)
+        progress("Lee shader cost per sample, x Cook-Torrance: " + ", ".join(
+            f"{k} {v['ratio_to_cook_torrance']:.2f}" for k, v in res.items()
+            if not k.startswith("_") and not k.startswith("Cook")))
+        return res
+
+    def tracer():
+        res = bench_lee.tracer_vs_closed_form(lc.tracer_cases, n=lc.tracer_n, target=lc.target,
+                                              quad_orders=lc.quad_orders, quad_ref=lc.quad_ref,
+                                              progress=progress)
+        progress("Lee tracer / closed form at equal albedo error: " + ", ".join(
+            f"{k} x{v['tracer_over_closed_form']:.3g}" for k, v in res.items()))
+        return res
+
+    def moments():
+        res = bench_lee.moments_accuracy(lc.moment_mus, lc.moment_alphas, lc.moment_grooves,
+                                         lc.moment_distributions, progress=progress)
+        worst = max(v["max_abs_error"] for v in res.values())
+        progress(f"Lee moment rules: max abs error {worst:.2g}")
+        return res
+
+    part("furnace", furnace)
+    part("cost", cost)
+    part("tracer", tracer)
+    part("moments", moments)
+    return out
+
+
+def plot_lee_furnace(furnace, path, dpi=80):
+    """The furnace grid as rendered (linear, 1 = white: a sphere that keeps all the energy
+    vanishes, the loss reads as darkening; dotted outlines mark the spheres) beside the
+    sphere means against alpha."""
+    from matplotlib.patches import Circle
+
+    plt = _plt()
+    layout, image, labels = furnace["layout"], furnace["image"], furnace["labels"]
+    alphas, means, noise = furnace["alphas"], furnace["means"], furnace["noise"]
+    fig, (ax_img, ax_plot) = plt.subplots(1, 2, figsize=(11, 4.6), dpi=dpi,
+                                          gridspec_kw={"width_ratios": [1.15, 1]})
+    ax_img.imshow(np.clip(np.nan_to_num(image[..., :3]), 0.0, 1.0), interpolation="nearest")
+    ax_img.set_xticks([(c + 0.5) * layout.cell_px for c in range(len(alphas))])
+    ax_img.set_xticklabels([f"alpha {a:g}" for a in alphas], fontsize=8)
+    ax_img.set_yticks([(r + 0.5) * layout.cell_px for r in range(len(labels))])
+    ax_img.set_yticklabels(labels, fontsize=8)
+    ax_img.set_title("White furnace (L = 1), linear: a sphere keeping all energy vanishes",
+                     fontsize=8)
+    scale = max(layout.width, layout.height) / layout.ortho_scale
+    for x, y in layout.centers():
+        ax_img.add_patch(Circle((layout.width / 2 + x * scale - 0.5,
+                                 layout.height / 2 - y * scale - 0.5),
+                                layout.radius * scale, fill=False, lw=0.6, ls=":",
+                                color="tab:blue"))
+    for i, label in enumerate(labels):  # Lee rows coincide at 1: told apart by style
+        lee = label.startswith("Lee")
+        ax_plot.errorbar(alphas, means[label], yerr=noise[label], marker="os^Dvp"[i % 6],
+                         ms=6 - 1.5 * i if lee else 3, mfc="none" if lee else None, capsize=2,
+                         lw=2.4 - 0.7 * i if lee else 1.2, ls="-" if not lee else "--",
+                         label=label)
+    ax_plot.axhline(1.0, color="k", lw=0.6)
+    ax_plot.set_xlabel("alpha (= roughness^2)", fontsize=8)
+    ax_plot.set_ylabel("sphere mean (mu >= 0.05)", fontsize=8)
+    ax_plot.set_title("Energy kept: multiple vs single scattering", fontsize=8)
+    ax_plot.tick_params(labelsize=7)
+    ax_plot.legend(fontsize=7, frameon=False)
+    ax_plot.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 # -- GPU (OptiX) ---------------------------------------------------------------------------------
 def optix_devices() -> list:
     """Names of OptiX devices bpy reports (none on a machine without an NVIDIA GPU)."""
@@ -800,8 +941,12 @@ def _fmt_t(t, how):
     return {"extrapolated": f"~{s} (extrapolated)", "first": f"<= {s} (1st point)"}.get(how, s)
 
 
+def _secs(t):
+    return f"{t:.3g} s" if t >= 0.01 else f"{t * 1000:.2g} ms"
+
+
 def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, refcost, sweep,
-               stress, gpu, total_seconds):
+               stress, gpu, total_seconds, lee=None):
     L = []
     a = L.append
     a("# Microfacet Lab: accuracy and speed\n")
@@ -972,13 +1117,109 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
         for b in bad[:20]:
             a(f"\n- bad sphere: {b[0]} {stability.describe(b[1])}: NaN {b[2]}, Inf {b[3]}, negative {b[4]}")
         a("")
+    if lee:
+        _write_lee(a, cfg, lee)
     a("## How to regenerate\n")
-    a("`make report` (full, about 15-25 minutes on 2 cores), `make report QUICK=1` (under 5 "
+    a("`make report` (full, about 18-28 minutes on 2 cores), `make report QUICK=1` (about 5 "
       "minutes: fewer samples, smaller grids, a subset of the sweep), "
       "`python scripts/report.py --smoke` (seconds; used by the tests). Output: `report/` "
       "(this page, PNGs, `results.json`); the full run also refreshes the README figures in "
       "`docs/figures/`.")
     Path(path).write_text("\n".join(L) + "\n")
+
+
+def _write_lee(a, cfg, lee):
+    lc = cfg.lee
+    a("## 5. Lee 2018 (V-grooves)\n")
+    a("Lee, Jarabo, Jeon, Gutierrez, Kim 2018: multiple mirror reflection inside V-grooves in "
+      "closed form (`lee_vgroove`, `osl/lee_vgroove.osl`, numpy twin `addon/reference/lee.py`). "
+      "Measured by `addon/bench_lee.py` (`python -m addon.bench_lee` runs it alone)"
+      + (" at this mode's smaller settings, stated below." if cfg.mode != "full" else ".") + "\n")
+    f = lee.get("furnace")
+    if f:
+        alphas, means, noise = f["alphas"], f["means"], f["noise"]
+        a("### White furnace\n")
+        a(f"A uniform white environment (L = 1), one row of spheres per model, alpha = "
+          f"{', '.join(f'{x:g}' for x in alphas)} (roughness = sqrt(alpha)), {f['samples']} "
+          f"samples per pixel, {f['cell_px']} px cells. A sphere that keeps all the energy is 1 "
+          "everywhere and vanishes against the background; single scattering darkens, most at "
+          "the rim.\n")
+        a("![Lee white furnace](lee_furnace.png)\n")
+        a("Sphere mean (pixels with mu >= 0.05, green channel) ± its standard error (pixel "
+          "spread / sqrt(pixels): an upper bound where the expected value varies over the "
+          "sphere, as for single scattering). Lee with F = 1: every sample weighs exactly 1, "
+          "so zero noise. Walter GGX: height-correlated Smith, F = 1. Cook-Torrance: Beckmann, "
+          "V-cavities, F >= 0.9996 (conductor n = 0.001, k = 100: the model has no F = 1 "
+          "option). Cycles multi-GGX: `microfacet_multi_ggx_aniso`, white albedo.\n")
+        from .bench_lee import furnace_markdown
+
+        a(furnace_markdown(alphas, means, noise))
+        a("")
+        last = {k: v[-1] for k, v in means.items()}
+        a(f"At alpha = {alphas[-1]:g} Lee keeps {last['Lee symmetric GGX']:.4f} of the energy, "
+          f"Cycles' multi-GGX {last['Cycles multi-GGX']:.4f}; single scattering loses "
+          f"{1 - last['Walter GGX (single)']:.0%} (Walter GGX) and "
+          f"{1 - last['Cook-Torrance (single)']:.0%} (Cook-Torrance).\n")
+    c = lee.get("cost")
+    if c:
+        st = c["_setup"]
+        lo, hi = st["samples"]
+        a("### Render cost per sample: Lee shader against Cook-Torrance\n")
+        a(f"Gold, white furnace, one row of {st['spheres_per_row']} spheres (roughness "
+          f"{', '.join(f'{r:g}' for r in st['roughness'])}, {st['cell_px']} px cells) per "
+          "shader, all rows in ONE scene (scene sync and OSL JIT done once before timing, "
+          f"{st['setup_seconds']:.1f} s). Each row rendered alone through a render border at "
+          f"{lo} and {hi} samples, rows interleaved, {st['repeats']} repeats: the time per "
+          f"sample is (t({hi}) - t({lo})) / {hi - lo}, which cancels the per-render overhead. "
+          "Each number is taken within a repeat (rows rendered moments apart share the "
+          "machine's load) and the median over the repeats shown; for the ratio to "
+          "Cook-Torrance also its range.\n")
+        a(f"| shader | ms per sample (row) | x Cook-Torrance | range over repeats | "
+          f"render at {hi} samples (s) |")
+        a("|---|---|---|---|---|")
+        for k, v in c.items():
+            if k.startswith("_"):
+                continue
+            a(f"| {k} | {v['ms_per_sample']:.3g} | **{v['ratio_to_cook_torrance']:.2f}** | "
+              f"{v['ratio_min']:.2f} - {v['ratio_max']:.2f} | {v[f'seconds_at_{hi}']:.3g} |")
+        a("")
+    t = lee.get("tracer")
+    if t:
+        a("### Closed form against the brute-force tracer: time to the same albedo error\n")
+        a(f"Directional albedo (green channel, gold, symmetric grooves) to an error of "
+          f"{lc.target:g}. Closed form: the deterministic quadrature `lee.albedo` of order n "
+          f"(n x n/2 groove normals); its error is the difference from order {lc.quad_ref} "
+          f"(which itself moves by at most "
+          f"{max(v['quad_ref_change'] for v in t.values()):.1g} from order {lc.quad_ref // 2}); "
+          "the time is that of the first order from which every larger one is within the "
+          f"target. Analytic sampler (`lee.sample`, what the shader does) and brute-force "
+          f"tracer (`vgroove.trace`, rays bounced in explicit grooves): {lc.tracer_n:,} samples "
+          "each, time scaled to a standard error equal to the target (t (s / target)^2). "
+          "Last column: tracer mean - closed form, in the tracer's standard errors (a "
+          "few units either way are chance).\n")
+        a("| case | albedo | closed form: order, time | analytic sampler | brute-force tracer | "
+          "tracer / closed form | tracer / sampler | tracer - closed form (s.e.) |")
+        a("|---|---|---|---|---|---|---|---|")
+        for k, v in t.items():
+            cf = (f"{v['closed_form_order']}, {_secs(v['closed_form_s'])}"
+                  if v["closed_form_order"] else "not reached")
+            a(f"| {k} | {v['albedo_G']:.5f} | {cf} | {_secs(v['sampler_s'])} | "
+              f"{_secs(v['tracer_s'])} | **{v['tracer_over_closed_form']:.3g}** | "
+              f"{v['tracer_over_sampler']:.2f} | {v['tracer_z']:+.1f} |")
+        a("")
+    m = lee.get("moments")
+    if m:
+        a("### Accuracy of the moment rules\n")
+        a("The directional moments (E, Vn, Vt) that the reference image is built from "
+          "(`lee.moments`, default rules `lee.MOMENT_NODES`) against rules with about 8x the "
+          "nodes (symmetric: a 384 x 384 tensor rule; asymmetric: 8x the partner points), gold, "
+          f"at mu = {', '.join(f'{x:g}' for x in lc.moment_mus)}.\n")
+        a("| grooves, distribution, alpha | max abs error of (E, Vn, Vt) | seconds per mu "
+          "(default rule) |")
+        a("|---|---|---|")
+        for k, v in m.items():
+            a(f"| {k} | {v['max_abs_error']:.2g} | {v['seconds_per_mu']:.3g} |")
+        a("")
 
 
 def _jsonable(obj):
@@ -1002,7 +1243,7 @@ README_FIGURES = ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png")
 
 
 def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
-        sections=("convergence", "samplers", "refcost", "stability")) -> dict:
+        sections=("convergence", "samplers", "refcost", "stability", "lee")) -> dict:
     progress = progress or Progress()
     cfg = config(mode)
     out = Path(out_dir)
@@ -1016,7 +1257,7 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
     for n in notes:
         progress(n)
     tables = ReferenceTables(cfg.moment_order)
-    conv = table = sun_cal = study = ff = refcost = sweep = gpu = None
+    conv = table = sun_cal = study = ff = refcost = sweep = gpu = lee = None
     stress = []
     if "convergence" in sections:
         if "sun" in cfg.envs:
@@ -1058,9 +1299,13 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
                 stress.append(s)
         else:
             notes.append("smoke mode: the OSL stress grid is not rendered.")
+    if "lee" in sections:
+        lee = lee_section(cfg, progress, notes)
+        if lee.get("furnace"):
+            plot_lee_furnace(lee["furnace"], out / "lee_furnace.png")
     total = time.perf_counter() - start
     write_page(out / "report.md", cfg, info, notes, rows, conv, table, sun_cal, study, ff,
-               refcost, sweep, stress, gpu, total)
+               refcost, sweep, stress, gpu, total, lee)
     results = {"mode": mode, "machine": info, "notes": notes, "seconds": total,
                "time_to_target": table, "sun_calibration": sun_cal, "reference_cost": refcost,
                "gpu": gpu,
@@ -1070,7 +1315,10 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
                "fireflies": ff["stats"] if ff else None,
                "stability": {k: v for k, v in (sweep or {}).items()},
                "osl_stress": [{k: v for k, v in asdict(s).items() if k not in ("image", "layout")}
-                              for s in stress]}
+                              for s in stress],
+               "lee": ({k: ({kk: vv for kk, vv in v.items() if kk not in ("image", "layout")}
+                            if k == "furnace" else v) for k, v in lee.items()}
+                       if lee else None)}
     (out / "results.json").write_text(json.dumps(_jsonable(results), indent=1))
     if figures_dir:
         fig_dir = Path(figures_dir)

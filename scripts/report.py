@@ -1,9 +1,10 @@
 """`make report`: error against render time, sampler weights, the reference's cost and numerical
-stability of every Microfacet Lab model, written to report/ (report.md, PNG plots,
-results.json). See addon/report.py.
+stability of every Microfacet Lab model, and the Lee 2018 V-groove measurements (furnace, cost
+per sample against Cook-Torrance, closed form against the tracer, moment rules), written to
+report/ (report.md, PNG plots, results.json). See addon/report.py.
 
-    python scripts/report.py            # full (about 15-25 min on 2 cores); refreshes docs/figures
-    python scripts/report.py --quick    # under 5 minutes
+    python scripts/report.py            # full (about 18-28 min on 2 cores); refreshes docs/figures
+    python scripts/report.py --quick    # about 5 minutes
     python scripts/report.py --smoke    # seconds: 2 sample counts, one tiny grid, one environment
 """
 import argparse
@@ -23,8 +24,8 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "report"), help="output folder")
     parser.add_argument("--figures", default=None,
                         help="copy the README figures here (default: docs/figures on a full run)")
-    parser.add_argument("--sections", default="convergence,samplers,refcost,stability",
-                        help="comma-separated subset of convergence,samplers,refcost,stability")
+    parser.add_argument("--sections", default="convergence,samplers,refcost,stability,lee",
+                        help="comma-separated subset of convergence,samplers,refcost,stability,lee")
     args = parser.parse_args(argv)
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
     figures = args.figures or (str(ROOT / "docs" / "figures") if mode == "full" else None)

@@ -1,9 +1,9 @@
 """`make report` in its smoke mode: the page, the plots and the numbers exist and make sense.
 
 The smoke run (scripts/report.py --smoke: two sample counts, one tiny grid per model variant,
-the gradient environment, a small stability sweep, no OSL stress grid) runs in a fresh process,
-so it also checks the command line. The helpers that turn curves into the table are tested on
-synthetic curves whose answer is known.
+the gradient environment, a small stability sweep, no OSL stress grid, the Lee section at tiny
+settings) runs in a fresh process, so it also checks the command line. The helpers that turn
+curves into the table are tested on synthetic curves whose answer is known.
 """
 import json
 import math
@@ -82,12 +82,98 @@ def test_smoke_plots_are_pictures_with_content(smoke):
     import matplotlib.image as mpimg
 
     out, _ = smoke
-    for name in ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png", "grids.png"):
+    for name in ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png", "grids.png",
+                 "lee_furnace.png"):
         path = out / name
         assert path.exists() and path.stat().st_size > 5000, name
         img = mpimg.imread(path)
         assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100, name
         assert img[..., :3].std() > 0.05, f"{name} looks blank"
+
+
+LEE_ROWS = ("Lee symmetric GGX", "Lee asymmetric GGX", "Lee symmetric Beckmann")
+SINGLE_ROWS = ("Walter GGX (single)", "Cook-Torrance (single)")
+
+
+@pytest.mark.render
+def test_smoke_lee_section_has_its_four_parts(smoke):
+    out, log = smoke
+    page = (out / "report.md").read_text()
+    assert "## 5. Lee 2018 (V-grooves)" in page, page[-3000:]
+    section = page.split("## 5. Lee 2018 (V-grooves)")[1].split("## How to regenerate")[0]
+    assert "Lee section, " not in page, "a Lee part failed (see the page's notes)"
+    for heading in ("### White furnace", "### Render cost per sample",
+                    "### Closed form against the brute-force tracer",
+                    "### Accuracy of the moment rules"):
+        assert heading in section, heading
+    assert "![Lee white furnace](lee_furnace.png)" in section
+    # Settings are stated; the furnace table has one row per model with a mean +- noise per alpha.
+    assert re.search(r"\d+ samples per pixel, \d+ px cells", section)
+    for label in LEE_ROWS + SINGLE_ROWS + ("Cycles multi-GGX",):
+        row = [line for line in section.splitlines() if line.startswith(f"| {label} |")]
+        assert row and len(re.findall(NUMBER + " ± " + NUMBER, row[0])) == 4, (label, row)
+    cost = [line for line in section.split("### Render cost")[1].split("###")[0].splitlines()
+            if line.startswith("| Lee ")]
+    assert len(cost) == 3 and all(re.search(r"\*\*-?" + NUMBER + r"\*\*", c) for c in cost), cost
+    assert re.search(r"\[report +[0-9.]+ s\] \(\d+/\d+\) Lee shader cost: ", log), log[-2000:]
+
+
+@pytest.mark.render
+def test_smoke_lee_furnace_keeps_energy_and_numbers_are_finite(smoke):
+    out, _ = smoke
+    lee = json.loads((out / "results.json").read_text())["lee"]
+    f = lee["furnace"]
+    assert f["alphas"] == [0.25, 0.5, 0.75, 1.0]
+    means, noise = f["means"], f["noise"]
+    for label in LEE_ROWS + SINGLE_ROWS + ("Cycles multi-GGX",):
+        assert len(means[label]) == 4 and len(noise[label]) == 4, label
+        assert all(math.isfinite(m) and 0 < m < 1.5 for m in means[label]), (label, means[label])
+        assert all(math.isfinite(s) and s >= 0 for s in noise[label]), (label, noise[label])
+    for label in LEE_ROWS:
+        # Within its stated noise of 1 (zero: with F = 1 every sample weighs 1) plus float32.
+        for m, s in zip(means[label], noise[label]):
+            assert abs(m - 1.0) <= 3 * s + 1e-4, (label, means[label], noise[label])
+        # Above single scattering at alpha = 1, well beyond both noises.
+        for single in SINGLE_ROWS:
+            gap = means[label][-1] - means[single][-1]
+            assert gap > 3 * (noise[label][-1] + noise[single][-1]) and gap > 0.1, (label, single)
+    # Cycles' multi-GGX recovers most of what single-scattering GGX loses.
+    walter, multi = means["Walter GGX (single)"][-1], means["Cycles multi-GGX"][-1]
+    assert multi - walter > 0.5 * (1 - walter), (multi, walter)
+
+
+@pytest.mark.render
+def test_smoke_lee_cost_tracer_and_moments_are_finite(smoke):
+    out, _ = smoke
+    lee = json.loads((out / "results.json").read_text())["lee"]
+    cost = {k: v for k, v in lee["cost"].items() if not k.startswith("_")}
+    lo, hi = lee["cost"]["_setup"]["samples"]
+    assert len(cost) == 4 and lo < hi
+    for k, v in cost.items():  # ratios from one run, side by side; no assertion on speed
+        for key in ("ms_per_sample", "ratio_to_cook_torrance", "ratio_min", "ratio_max"):
+            assert isinstance(v[key], float) and math.isfinite(v[key]), (k, key, v)
+    assert cost["Cook-Torrance (V-cavity sampler)"]["ratio_to_cook_torrance"] == 1.0
+    assert lee["tracer"]
+    for k, v in lee["tracer"].items():
+        assert 0 < v["albedo_G"] < 1 and v["closed_form_order"] is not None, (k, v)
+        for key in ("closed_form_s", "sampler_s", "tracer_s", "tracer_over_closed_form"):
+            assert isinstance(v[key], float) and math.isfinite(v[key]) and v[key] > 0, (k, key)
+        # The brute-force tracer agrees with the closed form (a 5-sigma statistical check).
+        assert abs(v["tracer_z"]) < 5, (k, v)
+        assert all(q["error"] < 0.05 for q in v["quadrature"]), v["quadrature"]
+    assert lee["moments"]
+    for k, v in lee["moments"].items():  # the default rules' documented accuracy (< 1e-3)
+        assert math.isfinite(v["max_abs_error"]) and 0 <= v["max_abs_error"] < 1e-3, (k, v)
+        assert v["seconds_per_mu"] > 0
+
+
+def test_bench_lee_markdown_skips_settings_and_lists():
+    from addon.bench_lee import furnace_markdown, markdown
+
+    table = markdown({"a": {"x": 1.5, "y": None, "pts": [1, 2]}, "_setup": {"samples": [1, 2]}})
+    assert table.splitlines() == ["| case | x | y |", "|---|---|---|", "| a | 1.5 | - |"]
+    rows = furnace_markdown((0.5, 1.0), {"m": [1.0, 0.5]}, {"m": [0.0, 0.01]}).splitlines()
+    assert rows[-1] == "| m | 1.0000 ± 0 | 0.5000 ± 0.01 |"
 
 
 def test_time_to_target_interpolates_on_log_log():
