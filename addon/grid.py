@@ -42,6 +42,8 @@ WHITE = Environment("white furnace", 1.0)
 # Smooth, non-uniform and positive everywhere: from 0.05 to 0.95, brightest up and to the right.
 GRADIENT = Environment("gradient", 0.5, 0.45, (0.6, 0.48, 0.64))
 ENVIRONMENTS = {"white": WHITE, "gradient": GRADIENT}
+# The horizontal direction of the gradient, which splits bands into sides (band_stats).
+SIDE_DIRECTION = np.array(GRADIENT.direction[:2]) / np.hypot(*GRADIENT.direction[:2])
 
 
 @dataclass(frozen=True)
@@ -153,6 +155,7 @@ class BandStats:
     bias: np.ndarray  # (3,) mean of render - reference
     stderr: np.ndarray  # (3,) std of the per-pixel residual / sqrt(n)
     reference: np.ndarray  # (3,) mean reference value
+    side: int = 0  # +1 / -1: the half of the band leaning toward / away from SIDE_DIRECTION
 
 
 MU_BANDS = ((0.05, 0.35), (0.35, 0.75), (0.75, 1.0001))
@@ -163,24 +166,32 @@ REFERENCE_ACCURACY = 1e-4
 
 
 def band_stats(layout: GridLayout, render: np.ndarray, reference: np.ndarray,
-               bands=MU_BANDS) -> list[BandStats]:
+               bands=MU_BANDS, sides: bool = True) -> list[BandStats]:
     """Bias of `render` against `reference` per sphere and band of mu, with its noise.
 
-    Pixels are independent samples (each pixel has its own random streams), so the standard
-    error of a band's mean residual is the scatter of its per-pixel residuals over sqrt(n).
+    With `sides` each band is split into the half whose normals lean toward the gradient's
+    horizontal direction and the other half (`BandStats.side` +1 / -1; 0 unsplit): an error in
+    the tangential moment Vt, or any error odd across the sphere, has opposite signs on the two
+    sides (a dipole) and cancels in a whole band. Pixels are independent samples (each pixel has
+    its own random streams), so the standard error of a mean residual is the scatter of its
+    per-pixel residuals over sqrt(n).
     """
-    index, _, mu = layout.pixel_geometry()
+    index, normal, mu = layout.pixel_geometry()
+    toward = normal[..., :2] @ SIDE_DIRECTION >= 0.0
     residual = render[..., :3] - reference[..., :3]
     out = []
     for i in range(layout.count):
         for lo, hi in bands:
-            sel = (index == i) & (mu >= lo) & (mu < hi)
-            n = int(sel.sum())
-            if n < 8:
-                continue
-            r = residual[sel]
-            out.append(BandStats(i, (lo, hi), n, r.mean(0), r.std(0, ddof=1) / np.sqrt(n),
-                                 reference[sel][:, :3].mean(0)))
+            band = (index == i) & (mu >= lo) & (mu < hi)
+            for side, sel in ([(1, band & toward), (-1, band & ~toward)] if sides
+                              else [(0, band)]):
+                n = int(sel.sum())
+                if n < 8:
+                    continue
+                r = residual[sel]
+                out.append(BandStats(i, (lo, hi), n, r.mean(0),
+                                     r.std(0, ddof=1) / np.sqrt(n),
+                                     reference[sel][:, :3].mean(0), side))
     return out
 
 

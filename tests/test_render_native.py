@@ -63,7 +63,7 @@ def test_height_correlated_matches_native_closures(renders):
     stats = paired_band_stats(layout, ours, native)
     z_crit = grid.sidak_z(3 * len(stats))
     # Both sides are renders: no reference floor is needed, only the noise of the difference.
-    bad = [f"{specs[s.sphere].label} mu {s.band}: ours - native {s.bias}, stderr {s.stderr}"
+    bad = [f"{specs[s.sphere].label} mu {s.band} side {s.side}: ours - native {s.bias}, stderr {s.stderr}"
            for s in stats if (np.abs(s.bias) > z_crit * np.maximum(s.stderr, 1e-7)).any()]
     assert not bad, f"z_crit {z_crit:.2f}, {env.name}:\n" + "\n".join(bad)
 
@@ -79,7 +79,7 @@ def test_separable_differs_from_native_where_theory_says(renders):
         # The measured difference agrees with theory within noise and reference accuracy...
         tolerance = z_crit * m.stderr + 2 * grid.REFERENCE_ACCURACY
         assert (np.abs(m.bias - p.bias) <= tolerance).all(), \
-            f"{specs[m.sphere].label} {m.band}: measured {m.bias} predicted {p.bias} se {m.stderr}"
+            f"{specs[m.sphere].label} {m.band} side {m.side}: measured {m.bias} predicted {p.bias} se {m.stderr}"
         # ...and where theory predicts a clear difference (always darker: G1 G1 <= 1/(1+L+L)),
         # the test sees it, with the right sign.
         if (p.bias < -2 * z_crit * m.stderr).all():
