@@ -569,17 +569,25 @@ def sampler_study(cfg, progress) -> dict:
     return out
 
 
+FIREFLY_ROWS = (  # (label, model, values): F = 1 reflection, and rough glass (issue 3)
+    ("Walter GGX reflection, F = 1", "walter_reflection",
+     {"distribution": "ggx", "fresnel_type": "none", "roughness": 0.6}),
+    ("Walter GGX glass, IOR 1.5", "walter_glass",
+     {"distribution": "ggx", "ior": 1.5, "roughness": 0.6}),
+)
+FIREFLY_SAMPLERS = ("dcos", "vndf")
+
+
 def fireflies(cfg, progress, out_dir) -> dict:
-    """One rough sphere (Walter GGX, F = 1, roughness 0.6) at 4 samples with D cos and with
-    visible normals, beside the reference: the rim is the grazing view."""
+    """Rough spheres (roughness 0.6; reflection with F = 1, and glass) at 4 samples with D cos
+    and with visible normals, beside the reference: the rim is the grazing view."""
     from . import harness
     from .reference.quadrature import moments_at
 
-    values = {"distribution": "ggx", "fresnel_type": "none", "roughness": 0.6}
-    specs = [grid.SphereSpec("walter_reflection", {**values, "sampler": s}, s)
-             for s in ("dcos", "vndf")]
-    layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 4, seed=5, cols=2,
-                                            cell_px=cfg.fireflies_px)
+    specs = [grid.SphereSpec(model, {**values, "sampler": s}, f"{label}, {s}")
+             for label, model, values in FIREFLY_ROWS for s in FIREFLY_SAMPLERS]
+    layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 4, seed=5,
+                                            cols=len(FIREFLY_SAMPLERS), cell_px=cfg.fireflies_px)
     tables = ReferenceTables(cfg.moment_order)
     ref = grid.reference_image(layout, [tables.get(s) for s in specs], grid.GRADIENT, moments_at)
     index, _, mu = layout.pixel_geometry()
@@ -900,17 +908,21 @@ def to_display(image):
 
 
 def plot_fireflies(ff, path, dpi=90):
+    """One row per FIREFLY_ROWS entry: D cos, visible normals, the numpy reference."""
     plt = _plt()
     layout, image, ref = ff["layout"], ff["image"], ff["reference"]
     c = layout.cell_px
-    panels = [("D cos (Walter), 4 spp", image[:, :c]), ("visible normals, 4 spp", image[:, c:2 * c]),
-              ("numpy reference", ref[:, :c])]
-    fig, axes = plt.subplots(1, 3, figsize=(7.2, 2.7), dpi=dpi)
-    for ax, (title, img) in zip(axes, panels):
-        ax.imshow(to_display(img), interpolation="nearest")
-        ax.set_title(title, fontsize=8)
-        ax.axis("off")
-    fig.suptitle("Walter GGX, F = 1, roughness 0.6, gradient environment", fontsize=8)
+    titles = ("D cos (Walter), 4 spp", "visible normals, 4 spp", "numpy reference")
+    fig, axes = plt.subplots(len(FIREFLY_ROWS), 3, figsize=(7.2, 2.5 * len(FIREFLY_ROWS)),
+                             dpi=dpi, squeeze=False)
+    for r, (label, _, _) in enumerate(FIREFLY_ROWS):
+        rows = slice(r * c, (r + 1) * c)
+        panels = (image[rows, :c], image[rows, c:2 * c], ref[rows, :c])
+        for j, (ax, img) in enumerate(zip(axes[r], panels)):
+            ax.imshow(to_display(img), interpolation="nearest")
+            ax.set_title(f"{label}\n{titles[j]}" if j == 0 else titles[j], fontsize=8)
+            ax.axis("off")
+    fig.suptitle("Roughness 0.6, gradient environment", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -1041,9 +1053,10 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
                 a(f"| {MODELS[model_id].label} | {sampler} | {r} | " + " | ".join(cells) + " |")
         a("")
     if ff:
-        a("Fireflies: one rough sphere at 4 samples per pixel (the rim is the grazing view):\n")
+        a("Fireflies: rough spheres (reflection and glass) at 4 samples per pixel (the rim is "
+          "the grazing view):\n")
         a("![fireflies](fireflies.png)\n")
-        a("| sampler | max pixel | relative RMSE (mu > 0.05) | relative RMSE at the rim (mu < 0.3) |")
+        a("| sphere, sampler | max pixel | relative RMSE (mu > 0.05) | relative RMSE at the rim (mu < 0.3) |")
         a("|---|---|---|---|")
         for k, s in ff["stats"].items():
             a(f"| {k} | {s['max']:.3g} | {s['rmse']:.3f} | {s['rim_rmse']:.3f} |")

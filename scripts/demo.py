@@ -94,7 +94,7 @@ def save_gallery(path, specs, panels):
     import matplotlib.pyplot as plt
 
     n = len(panels) + 1
-    fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 1.5, 5.4), dpi=110)
+    fig, axes = plt.subplots(1, n, figsize=(3.3 * n + 3.2, 0.55 * len(ROWS) + 1.8), dpi=110)
     for ax, (env_key, (layout, image, reference, seconds)) in zip(axes, panels.items()):
         ax.imshow(to_display(image), interpolation="nearest")
         ax.set_title(f"{grid.ENVIRONMENTS[env_key].name} ({seconds:.0f} s render)")
@@ -115,7 +115,8 @@ def save_gallery(path, specs, panels):
 
 def _label_axes(ax, layout, ylabels):
     ax.set_xticks([(c + 0.5) * layout.cell_px for c in range(layout.cols)])
-    ax.set_xticklabels([f"r = {r}" for r in ROUGHNESS])
+    ax.set_xticklabels([f"{r:g}" for r in ROUGHNESS])
+    ax.set_xlabel("Roughness")
     ax.set_yticks([(r + 0.5) * layout.cell_px for r in range(layout.rows)])
     ax.set_yticklabels([label for label, _, _ in ROWS] if ylabels else [])
 

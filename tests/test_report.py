@@ -50,7 +50,7 @@ def test_smoke_page_states_machine_versions_and_numbers(smoke):
     assert any(re.search(r"\| " + NUMBER + r" \|$", line) for line in rows), rows
     # Stability counts are numbers.
     assert re.search(r"\| \*\*all\*\* \| \d+ \| [0-9,]+ \| \*\*\d+\*\* \| \*\*\d+\*\* \|", page)
-    for table in ("| order N |", "| sampler | max pixel |", "var / max at"):
+    for table in ("| order N |", "| sphere, sampler | max pixel |", "var / max at"):
         assert table in page
 
 
