@@ -25,6 +25,7 @@ from addon.reference import lee
 from addon.reference import vgroove as vg
 from addon.reference.microfacet import Microfacet
 from addon.reference.special import chi2_sf, erfinv
+from test_reference_lee import _pairs  # random (wi, wo) pairs over the hemisphere
 
 DISTS = ("ggx", "beckmann")
 ALPHAS = (0.1, 0.5, 1.0)
@@ -226,12 +227,6 @@ def test_asymmetric_eval_matches_tracer(dist, alpha, deg):
 
 
 # -- reciprocity, convergence, the BSDF object -----------------------------------------------------
-def _pairs(rng, n):
-    mf = Microfacet("ggx", 1.0)  # spread directions over the hemisphere
-    return (mf.sample_dcos(rng.random(n), rng.random(n)),
-            mf.sample_dcos(rng.random(n), rng.random(n)))
-
-
 @pytest.mark.parametrize("dist", DISTS)
 def test_asymmetric_eval_reciprocity(dist):
     """f(wi, wo) = f(wo, wi) to 1e-9 (measured: 6e-14), F = 1 and gold: the quadrature is
