@@ -242,6 +242,24 @@ def inconsistent(stats: BandStats, z_crit: float) -> bool:
     return bool((np.abs(stats.bias) > z_crit * stats.stderr + REFERENCE_ACCURACY).any())
 
 
+def relative_bias_failures(layout: GridLayout, render: np.ndarray, reference: np.ndarray,
+                           labels: list, limit: float = 0.01) -> list[str]:
+    """Whole spheres (mu > 0.05) held to a relative bias below `limit`: a message per sphere
+    whose noise could not reveal such a bias (Sidak z over all spheres, the test would have
+    no power) or whose bias exceeds it; empty when every sphere passes."""
+    spheres = band_stats(layout, render, reference, bands=((0.05, 1.0001),), sides=False)
+    z_crit = sidak_z(3 * len(spheres))
+    failures = []
+    for s in spheres:
+        relative_noise = s.stderr / s.reference
+        relative_bias = np.abs(s.bias) / s.reference
+        if (relative_noise * z_crit > limit).any():
+            failures.append(f"{labels[s.sphere]}: no power, relative noise {relative_noise}")
+        if (relative_bias > limit).any():
+            failures.append(f"{labels[s.sphere]}: relative bias {relative_bias}")
+    return failures
+
+
 def sidak_z(tests: int, family_alpha: float = 1e-3) -> float:
     """Two-sided z threshold for `tests` comparisons at family-wise error `family_alpha`."""
     from statistics import NormalDist
