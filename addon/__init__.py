@@ -1,6 +1,11 @@
-"""Microfacet Lab add-on: node groups, Add menu entries, and the render harness.
+"""Microfacet Lab add-on: the package the extension ships (catalog, shader assembly, node groups,
+presets, UI and operators, scene specialization).
 
-Importing this package needs no bpy (so `addon.reference` and `addon.catalog` load with numpy
+`lab/` beside these modules is the verification lab (numpy reference, sphere-grid harness,
+report, stability sweep, benchmarks). It is left out of the built extension (the manifest's
+[build] paths_exclude_pattern); it may import the modules here, never the other way round.
+
+Importing this package needs no bpy (so `addon.lab.reference` and `addon.catalog` load with numpy
 alone); `register()` imports the bpy-side modules.
 """
 

@@ -1,6 +1,6 @@
 """The catalog of models and their parameters: the single source of truth.
 
-Node groups (addon/nodes.py), preset validation, the numpy reference (addon/reference) and the
+Node groups (addon/nodes.py), preset validation, the numpy reference (addon/lab/reference) and the
 tests are all driven from MODELS below. Imports nothing but the standard library, so it loads
 without bpy.
 

@@ -198,58 +198,8 @@ def find(preset_id: str, directory=PRESETS_DIR) -> Preset:
     return load_preset(path)
 
 
-# --- thumbnails (bpy, imported on call) -------------------------------------------------------
+# --- thumbnails (rendered by the lab: addon/lab/thumbnails.py) ---------------------------------
 
 def thumbnail_dirs() -> list[Path]:
     """Where the UI looks for <preset id>.png: shipped thumbnails, then `out/presets`."""
     return [PRESETS_DIR / "thumbnails", PRESETS_DIR.parent / "out" / "presets"]
-
-
-def render_thumbnails(out_dir, presets: list[Preset] | None = None, size: int = 64,
-                      samples: int = 32, env: str = "gradient", log=print) -> list[Path]:
-    """Render each preset on one sphere (the harness's sphere grid, one render for all) and write
-    `out_dir/<id>.png` (sRGB, size x size). Returns the written paths."""
-    from . import grid, harness
-    from .grid import SphereSpec
-
-    presets = list(load_all().values()) if presets is None else list(presets)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    specs = [SphereSpec(p.model_id, p.params, p.id) for p in presets]
-    cols = min(len(specs), 8)
-    log(f"[thumbnails] rendering {len(specs)} presets, {size} px, {samples} samples")
-    layout, image, seconds = harness.render_specs(specs, grid.ENVIRONMENTS[env], samples,
-                                                  seed=0, cols=cols, cell_px=size)
-    log(f"[thumbnails] render {seconds:.1f} s")
-    written = []
-    for i, preset in enumerate(presets):
-        row, col = divmod(i, cols)
-        tile = image[row * size:(row + 1) * size, col * size:(col + 1) * size, :3]
-        path = out_dir / f"{preset.id}.png"
-        write_png(path, linear_to_srgb(tile))
-        written.append(path)
-        log(f"[thumbnails] wrote {path}")
-    return written
-
-
-def linear_to_srgb(linear):
-    import numpy as np
-
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
-
-
-def write_png(path, rgb) -> None:
-    """Write an (H, W, 3) array in [0, 1] as an 8-bit PNG with the OpenImageIO bundled in bpy."""
-    import numpy as np
-
-    from . import bundled  # noqa: F401  (puts the bundled OpenImageIO on sys.path)
-    import OpenImageIO as oiio
-
-    data = np.ascontiguousarray(np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
-    spec = oiio.ImageSpec(data.shape[1], data.shape[0], data.shape[2], oiio.UINT8)
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise RuntimeError(f"cannot write {path}: {oiio.geterror()}")
-    out.write_image(data)
-    out.close()

@@ -1,4 +1,4 @@
-// Microfacet Lab: shared OSL maths, the twin of addon/reference/{fresnel,microfacet}.py.
+// Microfacet Lab: shared OSL maths, the twin of addon/lab/reference/{fresnel,microfacet}.py.
 // The add-on inlines this header into each shader's text block (Cycles compiles INTERNAL
 // scripts from a temporary file, so a local #include cannot be found; CYCLES_OSL.md).
 //

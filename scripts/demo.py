@@ -17,8 +17,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from addon import grid, harness, presets  # noqa: E402
-from addon.grid import SphereSpec  # noqa: E402
+from addon import presets  # noqa: E402
+
+from addon.lab import grid, harness  # noqa: E402
+from addon.lab.grid import SphereSpec  # noqa: E402
 
 ROUGHNESS = (0.05, 0.25, 0.5, 0.75, 1.0)
 COPPER = {"n": (0.271, 0.677, 1.316), "k": (3.609, 2.625, 2.292)}  # Johnson & Christy 1972

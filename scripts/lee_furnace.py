@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from addon import bench_lee  # noqa: E402
+from addon.lab import bench_lee  # noqa: E402
 
 
 def main(argv=None):

@@ -78,10 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     log(f"importing bpy ({len(chosen)} preset(s): {', '.join(p.id for p in chosen)})")
     import bpy  # noqa: F401  (inside Blender this is the running Blender)
 
-    from addon import grid, harness
+    from addon.lab import grid, harness, thumbnails
 
     if args.thumbnails:
-        presets.render_thumbnails(args.thumbnails, chosen, size=args.size, samples=args.samples,
+        thumbnails.render_thumbnails(args.thumbnails, chosen, size=args.size, samples=args.samples,
                                   env=args.env, log=log)
         log(f"done in {time.perf_counter() - start:.1f} s")
         return 0

@@ -1,7 +1,7 @@
 """`make report`: error against render time, sampler weights, the reference's cost and numerical
 stability of every Microfacet Lab model, and the Lee 2018 V-groove measurements (furnace, cost
 per sample against Cook-Torrance, closed form against the tracer, moment rules), written to
-report/ (report.md, PNG plots, results.json). See addon/report.py.
+report/ (report.md, PNG plots, results.json). See addon/lab/report.py.
 
     python scripts/report.py            # full (about 18-28 min on 2 cores); refreshes docs/figures
     python scripts/report.py --quick    # about 5 minutes
@@ -30,7 +30,7 @@ def main(argv=None):
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
     figures = args.figures or (str(ROOT / "docs" / "figures") if mode == "full" else None)
 
-    from addon import report
+    from addon.lab import report
 
     report.run(mode, args.out, figures, sections=tuple(args.sections.split(",")))
 

@@ -11,7 +11,9 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness, nodes, shaders  # noqa: E402
+from addon import nodes, shaders  # noqa: E402
+
+from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS, ENUM  # noqa: E402
 
 MIRROR = '#include "stdcycles.h"\nshader mirror(output closure color BSDF = 0) { BSDF = reflection(N); }'

@@ -17,7 +17,9 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness, presets  # noqa: E402
+from addon import presets  # noqa: E402
+
+from addon.lab import grid, harness  # noqa: E402
 
 PRESETS = ("gold", "red_plastic", "aluminium_brushed")
 

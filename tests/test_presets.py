@@ -126,7 +126,8 @@ def test_the_good_template_loads_and_scan_isolates_bad_files(tmp_path):
 @pytest.fixture()
 def ui():
     bpy = pytest.importorskip("bpy")
-    from addon import harness, preset_ui
+    from addon import preset_ui
+    from addon.lab import harness
 
     harness.new_scene()
     preset_ui.register()
@@ -237,7 +238,9 @@ def test_thumbnail_renders_tiny(tmp_path):
     pytest.importorskip("bpy")
     import OpenImageIO as oiio
 
-    written = presets.render_thumbnails(tmp_path, [ALL["gold"], ALL["red_plastic"]], size=24,
+    from addon.lab import thumbnails
+
+    written = thumbnails.render_thumbnails(tmp_path, [ALL["gold"], ALL["red_plastic"]], size=24,
                                         samples=4, log=lambda *_: None)
     assert [p.name for p in written] == ["gold.png", "red_plastic.png"]
     pixels = oiio.ImageBuf(str(written[0])).get_pixels(oiio.UINT8)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from addon.catalog import MODELS
-from addon.reference import make_bsdf
-from addon.reference.fresnel import fresnel_conductor, fresnel_dielectric
+from addon.lab.reference import make_bsdf
+from addon.lab.reference.fresnel import fresnel_conductor, fresnel_dielectric
 
 RNG_SEED = 20240611
 

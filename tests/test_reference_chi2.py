@@ -5,7 +5,7 @@ numpy Generator seed, histogram them on 20 x 40 cells over (theta_m, phi_m), com
 expected counts N * integral of the sampler's pdf over each cell (8 x 8 Gauss-Legendre nodes
 per cell, in the coordinates below, split at the pdfs' kinks), pool the cells with expected count < 5 into one, and compute Pearson's statistic.
 The p-value is the exact chi-square survival function (regularised upper incomplete gamma,
-addon/reference/special.chi2_sf). Significance 0.01 for the family, Sidak-corrected:
+addon/lab/reference/special.chi2_sf). Significance 0.01 for the family, Sidak-corrected:
 each test must have p > 1 - 0.99^(1/number of tests).
 
 The theta cells are uniform in s = the radial D cos CDF of the isotropic distribution with
@@ -18,8 +18,8 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference.microfacet import Microfacet
-from addon.reference.special import chi2_sf
+from addon.lab.reference.microfacet import Microfacet
+from addon.lab.reference.special import chi2_sf
 
 N_SAMPLES = 1_000_000
 N_THETA, N_PHI = 20, 40

@@ -1,4 +1,4 @@
-"""Walter 2007 rough glass (`walter_glass`, addon/reference/glass.py) over the whole sphere of
+"""Walter 2007 rough glass (`walter_glass`, addon/lab/reference/glass.py) over the whole sphere of
 outgoing directions: the formulas, weight = eval |cos| / pdf, chi-square goodness of fit of
 both samplers, the BTDF reciprocity relation, energy (R + T <= 1, = 1 for perfect glass), total
 internal reflection, the index-matched pass-through, and the quadrature of the moments
@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference import make_bsdf
-from addon.reference.fresnel import fresnel_dielectric
-from addon.reference.glass import MicrofacetGlass, refract, transmission_jacobian
-from addon.reference.microfacet import normalize
-from addon.reference.quadrature import directional_moments
+from addon.lab.reference import make_bsdf
+from addon.lab.reference.fresnel import fresnel_dielectric
+from addon.lab.reference.glass import MicrofacetGlass, refract, transmission_jacobian
+from addon.lab.reference.microfacet import normalize
+from addon.lab.reference.quadrature import directional_moments
 from test_reference_chi2 import pearson, s_of_tan2, theta_of_s
 
 RNG_SEED = 20240612

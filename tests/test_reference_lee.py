@@ -1,5 +1,5 @@
-"""Lee et al. 2018 kaleidoscopic V-groove model: the closed form (addon/reference/lee.py) against
-the brute-force groove tracer (addon/reference/vgroove.py), and the tracer against
+"""Lee et al. 2018 kaleidoscopic V-groove model: the closed form (addon/lab/reference/lee.py) against
+the brute-force groove tracer (addon/lab/reference/vgroove.py), and the tracer against
 Cook-Torrance V-cavity single scattering. numpy only (no bpy, no GPU)."""
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference import lee
-from addon.reference import vgroove as vg
-from addon.reference.microfacet import Microfacet, dot, reflect
-from addon.reference.special import chi2_sf
+from addon.lab.reference import lee
+from addon.lab.reference import vgroove as vg
+from addon.lab.reference.microfacet import Microfacet, dot, reflect
+from addon.lab.reference.special import chi2_sf
 
 DISTS = ("ggx", "beckmann")
 ALPHAS = (0.1, 0.5, 1.0)

@@ -1,7 +1,7 @@
 """Lee et al. 2018, asymmetric V-grooves: the evaluation `lee.eval_asymmetric` (the integral over
 the partner wall, docs/lee-asymmetric-grooves.md sec. 5) against the analytic sampler
 `lee.sample` (chi-square goodness of fit, normalisation, gold albedo), the brute-force tracer
-(addon/reference/vgroove.py), reciprocity, and the convergence of its quadrature. numpy only.
+(addon/lab/reference/vgroove.py), reciprocity, and the convergence of its quadrature. numpy only.
 
 Coordinates. A direction wo is binned by the groove that can send wi to it: phi = the azimuth of
 wi + wo (the groove frame t; folded to [0, pi] by the symmetry y -> -y, wi lies in the xz
@@ -21,10 +21,10 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference import lee
-from addon.reference import vgroove as vg
-from addon.reference.microfacet import Microfacet
-from addon.reference.special import chi2_sf, erfinv
+from addon.lab.reference import lee
+from addon.lab.reference import vgroove as vg
+from addon.lab.reference.microfacet import Microfacet
+from addon.lab.reference.special import chi2_sf, erfinv
 from test_reference_lee import _pairs  # random (wi, wo) pairs over the hemisphere
 
 DISTS = ("ggx", "beckmann")

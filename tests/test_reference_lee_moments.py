@@ -1,5 +1,5 @@
 """Lee 2018 reference for sphere images: the deterministic directional moments of LeeBRDF
-(addon/reference/lee.py `moments`) against Monte Carlo of the analytic sampler `lee.sample`, the
+(addon/lab/reference/lee.py `moments`) against Monte Carlo of the analytic sampler `lee.sample`, the
 derived bounce bound in closed form (the OSL shader's formula) against the search
 `lee.max_bounces`, and the OSL shader's constants against the numpy twin. numpy only."""
 from __future__ import annotations
@@ -12,17 +12,17 @@ import numpy as np
 import pytest
 
 from addon.catalog import MODELS
-from addon.reference import lee, make_bsdf
-from addon.reference import vgroove as vg
-from addon.reference.microfacet import Microfacet
-from addon.reference.quadrature import tabulate_moments
+from addon.lab.reference import lee, make_bsdf
+from addon.lab.reference import vgroove as vg
+from addon.lab.reference.microfacet import Microfacet
+from addon.lab.reference.quadrature import tabulate_moments
 
 OSL = Path(__file__).resolve().parent.parent / "osl" / "lee_vgroove.osl"
 GOLD_N = MODELS["lee_vgroove"].param("n").default
 GOLD_K = MODELS["lee_vgroove"].param("k").default
 GOLD = vg.fresnel_fn("conductor", n=GOLD_N, k=GOLD_K)
 # Accuracy of the default quadrature rules (MOMENT_NODES), as measured by
-# addon/bench_lee.py:moments_accuracy (finer rules) and used as floors in test_render_lee.py.
+# addon/lab/bench_lee.py:moments_accuracy (finer rules) and used as floors in test_render_lee.py.
 ACCURACY = {"symmetric": 2e-4, "asymmetric": 1.5e-3}
 
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference.microfacet import Microfacet, dot
+from addon.lab.reference.microfacet import Microfacet, dot
 
 ALPHAS = (0.01, 0.05, 0.2, 0.5, 1.0)
 INCIDENCE = (0.0, 30.0, 60.0, 80.0, 89.0)

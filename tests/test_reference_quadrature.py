@@ -6,11 +6,11 @@ import time
 import numpy as np
 import pytest
 
-from addon import grid
+from addon.lab import grid
 from addon.catalog import alphas
-from addon.reference import make_bsdf
-from addon.reference.fresnel import fresnel_dielectric
-from addon.reference.quadrature import directional_moments, moments_at
+from addon.lab.reference import make_bsdf
+from addon.lab.reference.fresnel import fresnel_dielectric
+from addon.lab.reference.quadrature import directional_moments, moments_at
 
 MU = np.concatenate([[0.02, 0.035, 0.05, 0.075], np.linspace(0.1, 1.0, 10)])
 # Roughness r with alpha = r^2 in {0.0025, 0.09, 0.49, 1}.

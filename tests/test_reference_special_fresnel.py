@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from addon.reference.fresnel import fresnel_conductor, fresnel_dielectric
-from addon.reference.special import chi2_sf, erf, erfc, erfinv, erfinv_giles
+from addon.lab.reference.fresnel import fresnel_conductor, fresnel_dielectric
+from addon.lab.reference.special import chi2_sf, erf, erfc, erfinv, erfinv_giles
 
 
 def test_erfc_relative_accuracy():
@@ -71,10 +71,10 @@ def test_fresnel_conductor_spot_values():
 
 
 def test_reference_imports_without_bpy():
-    """addon.reference loads with numpy alone (no bpy import, no scipy)."""
+    """addon.lab.reference loads with numpy alone (no bpy import, no scipy)."""
     import subprocess
     import sys
-    code = ("import sys, addon.reference, addon.reference.quadrature; "
+    code = ("import sys, addon.lab.reference, addon.lab.reference.quadrature; "
             "assert 'bpy' not in sys.modules and 'scipy' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(
         __import__("pathlib").Path(__file__).resolve().parents[1]))

@@ -15,9 +15,9 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS  # noqa: E402
-from addon.grid import SphereSpec  # noqa: E402
+from addon.lab.grid import SphereSpec  # noqa: E402
 
 NAN = float("nan")
 BAD = [

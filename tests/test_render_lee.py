@@ -3,7 +3,7 @@ twin, and the white furnace that single scattering fails.
 
 1. Sphere grids (symmetric and asymmetric grooves, GGX and Beckmann, roughness 0.05 .. 1, gold)
    against the reference image built from LeeBRDF's deterministic directional moments
-   (addon/reference/lee.py `moments`, checked against lee.sample Monte Carlo in
+   (addon/lab/reference/lee.py `moments`, checked against lee.sample Monte Carlo in
    tests/test_reference_lee_moments.py), with the statistics of tests/test_render_reference.py:
    Sidak-corrected z-test per sphere and band of mu plus the reference's accuracy, and the 1%
    criterion per sphere on two pooled seeds with a power check.
@@ -21,15 +21,15 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness  # noqa: E402
-from addon.grid import SphereSpec  # noqa: E402
-from addon.reference.quadrature import moments_at  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
+from addon.lab.grid import SphereSpec  # noqa: E402
+from addon.lab.reference.quadrature import moments_at  # noqa: E402
 
 ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
 SAMPLES = 256
 CELL_PX = 32
 # Accuracy of the reference per groove kind (the default quadrature rules of lee.moments;
-# measured by addon/bench_lee.py:moments_accuracy, floors of tests/test_reference_lee_moments.py).
+# measured by addon/lab/bench_lee.py:moments_accuracy, floors of tests/test_reference_lee_moments.py).
 # Symmetric grooves meet grid.REFERENCE_ACCURACY's order; the asymmetric rule is a 3D
 # low-discrepancy rule, coarser at the test's time budget.
 ACCURACY = {"symmetric": 2e-4, "asymmetric": 1.5e-3}
@@ -115,7 +115,7 @@ FURNACE_ALPHAS = (0.25, 0.5, 0.75, 1.0)
 
 @pytest.fixture(scope="module")
 def furnace():
-    from addon.bench_lee import furnace_means
+    from addon.lab.bench_lee import furnace_means
     return furnace_means(FURNACE_ALPHAS, samples=64, cell_px=32)
 
 

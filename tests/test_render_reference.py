@@ -2,7 +2,7 @@
 
 Every model x sampler x roughness is rendered on the sphere grid under a white furnace and a
 smooth gradient environment, and held against the reference image computed by quadrature of the
-model's evaluation formula (addon/reference/quadrature.py), which shares no code with the
+model's evaluation formula (addon/lab/reference/quadrature.py), which shares no code with the
 samplers the shaders use.
 
 Statistics: each pixel has its own random stream, so the noise of a mean over pixels is the
@@ -22,8 +22,8 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness  # noqa: E402
-from addon.grid import GRADIENT, WHITE, SphereSpec  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
+from addon.lab.grid import GRADIENT, WHITE, SphereSpec  # noqa: E402
 
 ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
 SAMPLES = 256

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addon import report
+from addon.lab import report
 
 ROOT = Path(__file__).resolve().parent.parent
 NUMBER = r"[0-9]+(?:\.[0-9]+)?(?:e[-+]?[0-9]+)?"
@@ -168,7 +168,7 @@ def test_smoke_lee_cost_tracer_and_moments_are_finite(smoke):
 
 
 def test_bench_lee_markdown_skips_settings_and_lists():
-    from addon.bench_lee import furnace_markdown, markdown
+    from addon.lab.bench_lee import furnace_markdown, markdown
 
     table = markdown({"a": {"x": 1.5, "y": None, "pts": [1, 2]}, "_setup": {"samples": [1, 2]}})
     assert table.splitlines() == ["| case | x | y |", "|---|---|---|", "| a | 1.5 | - |"]

@@ -14,7 +14,9 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import grid, harness, nodes, presets, specialize  # noqa: E402
+from addon import nodes, presets, specialize  # noqa: E402
+
+from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS  # noqa: E402
 
 PRESETS = ("red_plastic", "gold_cook_torrance", "white_plastic", "copper_cook_torrance")

@@ -1,4 +1,4 @@
-"""Numerical stability on stiff and extreme inputs (addon/stability.py), fast subsets of what
+"""Numerical stability on stiff and extreme inputs (addon/lab/stability.py), fast subsets of what
 `make report` runs in full.
 
 numpy: every catalog model with a numpy twin, evaluated and sampled over extreme inputs (a
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from addon import stability
+from addon.lab import stability
 from addon.catalog import MODELS
 
 
@@ -46,7 +46,7 @@ def test_numpy_sweep_has_no_nan_inf_negative_or_energy_gain(sweep):
 def test_energy_check_would_see_a_gain():
     """The albedo test is not blind: the same sweep over a BSDF whose sample weights are 3%
     above the reference's flags energy violations (and nothing else)."""
-    from addon.reference import make_bsdf
+    from addon.lab.reference import make_bsdf
 
     class Brighter:
         def __init__(self, bsdf):

@@ -15,7 +15,7 @@ uses `furnace_means`, and the report's smoke test).
   sampler (lee.sample) and the brute-force tracer (vgroove.trace) to reach the same albedo error.
 - `moments_accuracy`: the default moment rules (lee.MOMENT_NODES) against much finer ones.
 `markdown(results)` formats any of these dicts as a Markdown table. Run them all with
-`python -m addon.bench_lee` (from the repository root, the pinned environment).
+`python -m addon.lab.bench_lee` (from the repository root, the pinned environment).
 """
 from __future__ import annotations
 
@@ -206,7 +206,7 @@ def tracer_vs_closed_form(cases=TRACER_CASES, groove: str = "symmetric", n: int 
     - analytic sampler (lee.sample) and brute-force tracer (vgroove.trace): n samples each,
       standard error s in t seconds; time to `target` = t (s / target)^2.
     Also the agreement of the tracer's mean with the reference quadrature, in standard errors."""
-    from .catalog import MODELS
+    from ..catalog import MODELS
     from .reference import lee
     from .reference import vgroove as vg
     from .reference.microfacet import Microfacet
@@ -254,7 +254,7 @@ def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01), alphas=(0.09, 1.0),
                      progress=None) -> dict:
     """Max abs difference of (E, Vn, Vt) between the default rules of lee.moments and rules with
     about 8x the nodes (symmetric 384^2 tensor; asymmetric R3 with 8x the points), gold."""
-    from .catalog import MODELS
+    from ..catalog import MODELS
     from .reference import lee
     from .reference import vgroove as vg
     from .reference.microfacet import Microfacet

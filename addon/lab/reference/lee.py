@@ -2,7 +2,7 @@
 the kaleidoscopic closed form of multiple mirror reflection in V-grooves (numpy reference).
 
 Derivation (own geometry, no code of the authors) in docs/lee-asymmetric-grooves.md; ground
-truth: addon/reference/vgroove.py (brute-force tracing). Conventions: MODELS.md (n = (0,0,1),
+truth: addon/lab/reference/vgroove.py (brute-force tracing). Conventions: MODELS.md (n = (0,0,1),
 wi toward the viewer, wo away from the surface, vectors (..., 3)).
 
 2D angles. A groove is seen in its cross-section (the plane of t and n, t horizontal _|_ the
@@ -738,7 +738,7 @@ def _groove_nodes(mf: Microfacet, groove: str, n_theta: int, n_phi: int, n_partn
 
 # Default (n_theta, n_phi, n_partner) of moments() (asymmetric: R3 points = their product).
 # Measured accuracy (max abs error of E, Vn, Vt for mu 1 .. 0.01, gold, alpha 0.09 and 1,
-# against 8x finer rules; addon/bench_lee.py:moments_accuracy): 1.8e-4 symmetric, 2.5e-4
+# against 8x finer rules; addon/lab/bench_lee.py:moments_accuracy): 1.8e-4 symmetric, 2.5e-4
 # asymmetric GGX, 9.1e-4 asymmetric Beckmann; the render test's floors are 2e-4 and 1.5e-3.
 MOMENT_NODES = {
     ("symmetric", "ggx"): (128, 128, 1),

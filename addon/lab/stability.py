@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .catalog import COLOR, ENUM, MODELS
+from ..catalog import COLOR, ENUM, MODELS
 
 NAN = float("nan")
 ALPHA_DELTA_ROUGHNESS = math.sqrt(1e-7)  # roughness whose alpha is the delta threshold
@@ -388,7 +388,7 @@ STRESS_ETA = (0.0, 0.1, 1.0 - 1e-6, 1.0, 1.0 + 1e-6, 10.0, 100.0, NAN, -3.0)
 
 def osl_models() -> list:
     """Catalog models whose OSL source exists (a model can be catalogued before its shader)."""
-    from .shaders import OSL_DIR
+    from ..shaders import OSL_DIR
 
     return [m for m, model in MODELS.items() if (OSL_DIR / f"{model.shader}.osl").exists()]
 
@@ -469,7 +469,8 @@ def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int 
                     sun=None) -> StressResult:
     """Render the stress cases through the OSL shaders and count bad pixels. `env_name` is a
     key of grid.ENVIRONMENTS, or 'sun' with `sun` a callable(scene) adding the light."""
-    from . import grid, harness, nodes
+    from .. import nodes
+    from . import grid, harness
 
     scene = harness.new_scene()
     skipped = {m: "no OSL source" for m in MODELS if m not in osl_models()}

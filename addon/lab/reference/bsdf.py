@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..catalog import MODELS, alphas
+from ...catalog import MODELS, alphas
 from .fresnel import fresnel_conductor, fresnel_dielectric
 from .microfacet import Microfacet, dot, normalize, reflect
 
@@ -159,14 +159,14 @@ def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
             sampler=params["sampler"], fresnel=params["fresnel_type"], ior=params["ior"],
             n=params["n"], k=params["k"], tint=params["base_color"])
     if model_id == "walter_glass":
-        # Walter et al. 2007 eqs. 20-21, reflection plus transmission (addon/reference/glass.py).
+        # Walter et al. 2007 eqs. 20-21, reflection plus transmission (addon/lab/reference/glass.py).
         from .glass import MicrofacetGlass
         ax, ay = alphas(params["roughness"])
         return MicrofacetGlass(
             Microfacet(params["distribution"], ax, ay), masking=params["masking"],
             sampler=params["sampler"], ior=params["ior"], tint=params["base_color"])
     if model_id == "lee_vgroove":
-        # Lee et al. 2018 (addon/reference/lee.py): kaleidoscopic multi-bounce V-grooves.
+        # Lee et al. 2018 (addon/lab/reference/lee.py): kaleidoscopic multi-bounce V-grooves.
         from .lee import LeeBRDF
         from .microfacet import Microfacet as _Microfacet
 

@@ -24,7 +24,7 @@ first moment (2/3) albedo n. A delta lobe (roughness 0) is exact: E = R(mu),
 (Vn, Vt) = R(mu) (mu, -sqrt(1 - mu^2)) with R the mirror reflectance.
 Convergence (order N vs 2N) is tested in tests/test_reference_quadrature.py.
 
-Glass (a BSDF with `has_transmission`, addon/reference/glass.py): the moments are over the
+Glass (a BSDF with `has_transmission`, addon/lab/reference/glass.py): the moments are over the
 whole sphere, E = integral f |cos_o| dwo and (Vn, Vt) from integral f |cos_o| wo dwo,
 reflection plus transmission (in the single-interface render the refracted ray leaves the
 sphere in direction wo). The transmitted lobe uses the same D cos parametrisation, with

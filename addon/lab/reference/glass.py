@@ -9,7 +9,7 @@ Conventions (shared/design/MODELS.md). Local frame n = (0,0,1); wi.z > 0 (the si
 +z; f is 0 for wi.z <= 0); wo.z > 0 is reflection, wo.z < 0 transmission. `ior` IS the relative
 index eta = n_o / n_i seen from wi's side (n_i = 1 for wi, n_o = eta below the interface); eta < 1
 means wi is in the denser medium (the OSL shader passes 1/ior on back faces). Shapes as
-addon/reference/bsdf.py: directions (..., 3), u (..., 3), RGB (..., 3), pdf (...).
+addon/lab/reference/bsdf.py: directions (..., 3), u (..., 3), RGB (..., 3), pdf (...).
 
 Model (Walter 2007 eqs. 20, 21; MODELS.md sec. 2):
     f_r = tint F(wi.h_r) G2(wi, wo, h_r) D(h_r) / (4 |wi.n| |wo.n|),   h_r = normalize(wi + wo)

@@ -1,4 +1,4 @@
-"""Render harness: the sphere grid of addon/grid.py built and rendered headless in Cycles.
+"""Render harness: the sphere grid of addon/lab/grid.py built and rendered headless in Cycles.
 
 One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back with the
 OpenImageIO bundled in bpy (`render`). Settings that silently change results (CYCLES_OSL.md) are
@@ -14,8 +14,8 @@ import time
 import bpy
 import numpy as np
 
-from . import bundled  # noqa: F401  (bundled OpenImageIO and oslquery on sys.path)
-from . import nodes
+from .. import bundled  # noqa: F401  (bundled OpenImageIO and oslquery on sys.path)
+from .. import nodes
 from .grid import Environment, GridLayout
 
 SPHERE_GROUP = "Microfacet Lab: sphere"
@@ -174,7 +174,7 @@ def linked_model_material(model_id: str, values: dict, name: str):
     """A model's material whose numeric inputs come through links from Value (and Combine XYZ)
     nodes, so any value, NaN or out of range, reaches the shader unclamped by the sockets: the
     way to test the OSL clamps. Enum values are set on the group node (validated)."""
-    from .catalog import COLOR, ENUM, MODELS
+    from ..catalog import COLOR, ENUM, MODELS
 
     model = MODELS[model_id]
     material, tree, output = _new_material(name)

@@ -4,7 +4,7 @@ Each entry is the body of a one-closure shader; `native_source(kind, roughness)`
 text for a Script node (harness.osl_material). Roughness maps to alpha as everywhere
 (catalog.alphas); the conductor and glass use the catalog's default gold and IOR 1.5.
 """
-from .catalog import MODELS, alphas
+from ..catalog import MODELS, alphas
 
 GOLD_N = MODELS["walter_reflection"].param("n").default
 GOLD_K = MODELS["walter_reflection"].param("k").default

@@ -1,6 +1,6 @@
 """The sphere-grid scene in numpy: layout, environments, per-pixel geometry, reference image.
 
-No bpy here: the render harness (addon/harness.py) builds the same scene in Blender from these
+No bpy here: the render harness (addon/lab/harness.py) builds the same scene in Blender from these
 objects, and the tests compare the two.
 
 Geometry: an orthographic camera on +z looks down -z, so every pixel sees the view direction
@@ -127,7 +127,7 @@ def tangent_toward_view(normal: np.ndarray) -> np.ndarray:
 
 def reference_image(layout: GridLayout, tables: list, env: Environment, moments_at) -> np.ndarray:
     """Reference RGB image of the grid: tables[i] is sphere i's tabulated moments (E, Vn, Vt)
-    as returned by `addon.reference.quadrature.tabulate_moments`; `moments_at(table, mu)`
+    as returned by `addon.lab.reference.quadrature.tabulate_moments`; `moments_at(table, mu)`
     interpolates them. Background pixels get the environment seen straight down (L(-z))."""
     index, normal, mu = layout.pixel_geometry()
     image = np.empty(index.shape + (3,))
@@ -209,9 +209,9 @@ _TABLES: dict = {}  # (model, values) -> moment table, for the process
 
 def reference_tables(specs: list) -> list:
     """Tabulated BSDF moments for each sphere (None for a gap), by converged quadrature of the
-    model's evaluation formula (addon/reference/quadrature.py), computed once per process for
+    model's evaluation formula (addon/lab/reference/quadrature.py), computed once per process for
     each model and set of values (glass tables take seconds)."""
-    from .catalog import MODELS
+    from ..catalog import MODELS
     from .reference import make_bsdf
     from .reference.quadrature import tabulate_moments
 

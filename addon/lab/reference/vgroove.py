@@ -30,7 +30,7 @@ reaches the opening. wo = rho (d2.x t + d2.y n) - (wi.u) u (pointing away from t
 Normalisation: apex at the origin, opening width 1 (depth 1 / (cot theta_l + cot theta_r)).
 Each bounce multiplies the RGB throughput by the exact Fresnel reflectance at that bounce.
 
-This file deliberately does not use the unfolding (kaleidoscope) of addon/reference/lee.py: it
+This file deliberately does not use the unfolding (kaleidoscope) of addon/lab/reference/lee.py: it
 is the independent ground truth the closed form is tested against.
 """
 from __future__ import annotations

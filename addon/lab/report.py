@@ -13,8 +13,8 @@ Sections (each a function below, orchestrated by `run`):
    normals in numpy: variance and maximum of the sample weight against incidence and roughness;
    and a firefly picture (`fireflies`).
 3. `reference_cost`: time and accuracy of the reference image against quadrature order.
-4. Stability: addon/stability.py (numpy sweep, OSL stress grid).
-5. `lee_section`: the Lee 2018 V-groove model (addon/bench_lee.py): white-furnace grid over
+4. Stability: addon/lab/stability.py (numpy sweep, OSL stress grid).
+5. `lee_section`: the Lee 2018 V-groove model (addon/lab/bench_lee.py): white-furnace grid over
    alpha against single scattering and Cycles' multi-GGX (table and picture), render cost per
    sample against the Cook-Torrance shader measured side by side, the closed-form albedo
    against the brute-force tracer at equal error, and the accuracy of the moment rules.
@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import grid, stability
-from .catalog import MODELS
+from ..catalog import MODELS
 from .native import native_source
 
 TARGET = 0.01  # relative RMSE for the time-to-target table
@@ -637,7 +637,7 @@ def reference_cost(cfg, rows, progress) -> list:
 
 # -- section 5: Lee 2018 V-grooves -------------------------------------------------------------
 def lee_section(cfg, progress, notes) -> dict:
-    """The measurements of addon/bench_lee.py at the mode's settings. Each part that fails is
+    """The measurements of addon/lab/bench_lee.py at the mode's settings. Each part that fails is
     reported in `notes` (and left out of the page) rather than losing the run."""
     from . import bench_lee
 
@@ -970,7 +970,7 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
       f"Python {info['python']}, matplotlib {info.get('matplotlib', '?')}.")
     if gpu is None:
         a("- GPU: **the OptiX comparison was not run: no NVIDIA GPU (no OptiX device reported by "
-          "bpy) on this machine.** The code path (`addon/report.py: optix_comparison`) runs when "
+          "bpy) on this machine.** The code path (`addon/lab/report.py: optix_comparison`) runs when "
           "bpy reports an OptiX device; it has not been tested.")
     else:
         a(f"- GPU: OptiX on {', '.join(gpu['devices'])}: white-furnace grid at {gpu['samples']} "
@@ -1075,7 +1075,7 @@ def write_page(path, cfg, info, notes, rows, conv, table, sun_cal, study, ff, re
     if sweep:
         tot = sweep["_total"]
         a("## 4. Stability on stiff and extreme inputs\n")
-        a(f"numpy sweep (`addon/stability.py`): {tot.cases:,} cases ({tot.eval_cases:,} evaluations "
+        a(f"numpy sweep (`addon/lab/stability.py`): {tot.cases:,} cases ({tot.eval_cases:,} evaluations "
           f"f and f cos, {tot.sample_cases:,} samples) and {tot.albedo_tests:,} Monte Carlo albedo "
           f"tests ({cfg.albedo_samples} samples each, energy violation when the albedo exceeds 1 "
           f"by more than {sweep['_z_crit']:.2f} standard errors) over {tot.combos:,} parameter "
@@ -1145,8 +1145,8 @@ def _write_lee(a, cfg, lee):
     lc = cfg.lee
     a("## 5. Lee 2018 (V-grooves)\n")
     a("Lee, Jarabo, Jeon, Gutierrez, Kim 2018: multiple mirror reflection inside V-grooves in "
-      "closed form (`lee_vgroove`, `osl/lee_vgroove.osl`, numpy twin `addon/reference/lee.py`). "
-      "Measured by `addon/bench_lee.py` (`python -m addon.bench_lee` runs it alone)"
+      "closed form (`lee_vgroove`, `osl/lee_vgroove.osl`, numpy twin `addon/lab/reference/lee.py`). "
+      "Measured by `addon/lab/bench_lee.py` (`python -m addon.lab.bench_lee` runs it alone)"
       + (" at this mode's smaller settings, stated below." if cfg.mode != "full" else ".") + "\n")
     f = lee.get("furnace")
     if f:
