@@ -1,13 +1,17 @@
 """The extension package: manifest validation, zip contents, and an install into a fresh bpy.
 
 The zip is built once (module fixture) by scripts/build_package.py, which runs the extension tool
-bundled in the bpy wheel. The install test runs Blender's own "Install from Disk" operator in a
-separate process with a throw-away user resource directory, then builds every model's node group
-from the INSTALLED copy (bl_ext.user_default.microfacet_lab), so a file missing from the zip shows
-up as an import or OSL compile failure.
+bundled in the bpy wheel. It must hold exactly the Python modules the add-on imports at run time
+(found by following the imports of the entry point, including those inside functions), plus osl/,
+presets/, README and LICENSE: no verification lab (addon/lab/), no tests, scripts or docs. The
+install test runs Blender's own "Install from Disk" operator in a separate process with a
+throw-away user resource directory, then registers, builds every model's node group and applies
+every preset from the INSTALLED copy (bl_ext.user_default.microfacet_lab), so a file missing from
+the zip shows up as an import, OSL compile or preset failure.
 """
 from __future__ import annotations
 
+import ast
 import importlib.util
 import shutil
 import zipfile
@@ -59,28 +63,79 @@ def test_validator_checks_tags(tmp_path):
         build_package.validate(tmp_path)
 
 
+def runtime_modules(entry: Path = ROOT / "__init__.py") -> set[str]:
+    """Repository paths of the modules the add-on imports at run time: the relative imports of
+    the entry point, followed through every module (imports inside functions count too)."""
+    seen, todo = set(), [entry.resolve()]
+    while todo:
+        path = todo.pop()
+        rel = path.relative_to(ROOT).as_posix()
+        if rel in seen:
+            continue
+        seen.add(rel)
+        package = path.parent
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom) or node.level == 0:
+                continue
+            base = package
+            for _ in range(node.level - 1):
+                base = base.parent
+            stem = base.joinpath(*node.module.split(".")) if node.module else base
+            targets = [stem] if node.module else []
+            targets += [stem / alias.name for alias in node.names]
+            for target in targets:
+                for candidate in (target.with_suffix(".py"), target / "__init__.py"):
+                    if candidate.is_file():
+                        todo.append(candidate.resolve())
+    return seen
+
+
+def test_runtime_modules_are_the_addon_without_the_lab():
+    """What the closure finds: the add-on's modules, never a lab module (addon/lab/ may import
+    the add-on; the add-on never imports the lab). Would catch a lab import slipped into the
+    add-on, even one inside a function."""
+    mods = runtime_modules()
+    assert {"__init__.py", "addon/__init__.py", "addon/ui.py", "addon/nodes.py",
+            "addon/preset_ui.py", "addon/presets.py", "addon/catalog.py", "addon/shaders.py",
+            "addon/specialize.py", "addon/bundled.py"} <= mods, mods
+    assert not [m for m in mods if m.startswith("addon/lab/")], mods
+    # The closure follows function-level imports (preset_ui imports specialize inside execute).
+    assert "addon/specialize.py" in mods
+
+
 def test_zip_contents(package):
     assert package.name == f"{EXT_ID}-{build_package.manifest(ROOT)['version']}.zip"
     with zipfile.ZipFile(package) as zf:
         names = set(zf.namelist())
     files = {n for n in names if not n.endswith("/")}
-    assert {"__init__.py", "blender_manifest.toml", "addon/__init__.py", "addon/catalog.py",
-            "addon/nodes.py", "addon/ui.py", "addon/shaders.py", "osl/microfacet.h"} <= files
+    # Python: exactly the modules the add-on imports at run time.
+    assert {n for n in files if n.endswith(".py")} == runtime_modules()
+    assert not [n for n in names if n.startswith(("addon/lab", "tests/", "scripts/", "docs/"))]
     for model in MODELS.values():
         assert f"osl/{model.shader}.osl" in files
-    for path in (ROOT / "osl").iterdir():
-        if path.is_file() and not path.name.startswith("."):
-            assert f"osl/{path.name}" in files
-    allowed_top = {"__init__.py", "blender_manifest.toml", "addon", "osl", "presets", "README.md"}
+    for sub in ("osl", "presets"):
+        shipped = {p.relative_to(ROOT).as_posix() for p in (ROOT / sub).rglob("*")
+                   if p.is_file() and not any(part.startswith(".") for part in p.parts)}
+        assert shipped <= files, shipped - files
+    allowed_top = {"__init__.py", "blender_manifest.toml", "addon", "osl", "presets", "README.md",
+                   "LICENSE"}
     for name in files:
         top = name.split("/")[0]
-        assert top in allowed_top or top.startswith("LICENSE"), f"unexpected file in package: {name}"
+        assert top in allowed_top, f"unexpected file in package: {name}"
         assert "__pycache__" not in name and not name.endswith((".pyc", ".pyo")), name
         assert not any(part.startswith(".") for part in name.split("/")), name
         if top == "addon":
             assert name.endswith(".py"), f"non-Python file under addon/: {name}"
-    if (ROOT / "README.md").is_file():
-        assert "README.md" in files
+    assert {"README.md", "LICENSE"} <= files
+
+
+def test_license_is_the_gpl3_the_manifest_declares():
+    assert build_package.manifest(ROOT)["license"] == ["SPDX:GPL-3.0-or-later"]
+    text = " ".join((ROOT / "LICENSE").read_text().split())
+    assert text.startswith("GNU GENERAL PUBLIC LICENSE")
+    assert "Version 3, 29 June 2007" in text and "END OF TERMS AND CONDITIONS" in text
+    assert "or (at your option) any later version" in text
+    assert len(text) > 30000  # the full text, not a notice
 
 
 INSTALL_SCRIPT = '''
@@ -123,6 +178,21 @@ for model_id in catalog.MODELS:
     }
 out["groups"] = groups
 out["models"] = list(catalog.MODELS)
+
+# Every preset, applied by the installed operator to its own object (what an artist does).
+presets = importlib.import_module(ext.__name__ + ".addon.presets")
+applied = {}
+for preset_id in sorted(presets.load_all()):
+    mesh = bpy.data.meshes.new(preset_id)
+    obj = bpy.data.objects.new(preset_id, mesh)
+    scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    result = bpy.ops.material.microfacet_lab_apply_preset(preset=preset_id)
+    mat = obj.active_material
+    applied[preset_id] = {"result": sorted(result), "material": mat.name if mat else None,
+                          "key": mat.get("microfacet_lab_preset") if mat else None}
+out["presets_dir"] = str(presets.PRESETS_DIR)
+out["applied"] = applied
 report(out)
 '''
 
@@ -147,6 +217,12 @@ def test_install_in_fresh_blender(package, tmp_path):
         assert group["bytecode_len"] > 0, f"{model_id}: no bytecode\n{log}"
         assert "BSDF" in group["outputs"], f"{model_id}: outputs {group['outputs']}\n{log}"
         assert group["inputs"] == len(MODELS[model_id].params), f"{model_id}\n{log}"
+    assert Path(out["presets_dir"]).resolve() == (installed / "presets").resolve(), log
+    shipped = sorted(p.stem for p in (ROOT / "presets").glob("*.toml"))
+    assert sorted(out["applied"]) == shipped, log
+    for preset_id, applied in out["applied"].items():
+        assert applied["result"] == ["FINISHED"], f"{preset_id}: {applied}\n{log}"
+        assert applied["key"] == preset_id and applied["material"], f"{preset_id}: {applied}"
 
 
 def test_build_script_cli(tmp_path):
