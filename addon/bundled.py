@@ -2,7 +2,7 @@
 
 `bpy.utils.expose_bundled_modules` exists from Blender 4.4; inside a Blender executable the
 modules are already importable, so older versions need nothing. Never install the PyPI
-OpenImageIO wheel beside bpy: a second OpenImageIO breaks oslquery (CYCLES_OSL.md).
+OpenImageIO wheel beside bpy: a second OpenImageIO breaks oslquery (docs/cycles-osl.md).
 """
 import bpy
 

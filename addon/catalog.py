@@ -6,7 +6,7 @@ without bpy.
 
 Parameter ids are the OSL shader parameter names and the keys of the reference's parameter dicts;
 labels are what the user sees on the node group. Enums are passed to OSL as ints (their index in
-`items`), so an unlinked enum is a constant the OSL compiler folds away (CYCLES_OSL.md).
+`items`), so an unlinked enum is a constant the OSL compiler folds away (docs/cycles-osl.md).
 """
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 // Microfacet Lab: shared OSL maths, the twin of addon/lab/reference/{fresnel,microfacet}.py.
 // The add-on inlines this header into each shader's text block (Cycles compiles INTERNAL
-// scripts from a temporary file, so a local #include cannot be found; CYCLES_OSL.md).
+// scripts from a temporary file, so a local #include cannot be found; docs/cycles-osl.md).
 //
-// Conventions (shared/design/MODELS.md): local frame n = (0,0,1); wi points from the surface
+// Conventions (docs/models.md): local frame n = (0,0,1); wi points from the surface
 // toward the viewer (Cycles' I); wo points away from the surface; eta = n_t / n_i.
 // Enum codes (MFL_DISTRIBUTION_GGX, MFL_SAMPLER_VNDF, ...) are #defines the add-on generates
 // from addon/catalog.py ENUMS and places before this header.
@@ -17,7 +17,7 @@
 // ---------------------------------------------------------------------------------------
 // Random numbers. Cycles exposes no per-sample random number to surface shaders, so hash
 // values that change every sample (hit point, direction, ray length), decorrelated per
-// dimension (CYCLES_OSL.md).
+// dimension (docs/cycles-osl.md).
 vector rng_key()
 {
     float ray_length = 0.0;

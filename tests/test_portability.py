@@ -3,7 +3,7 @@ bpy process that never imports the add-on, because the OSL bytecode travels in t
 INTERNAL Script nodes.
 
 Measured: the fresh process reproduces the image exactly with the same seed (max |diff| 0 on
-this machine; CYCLES_OSL.md notes ~3e-7 between thread counts), so the test asserts agreement
+this machine; docs/cycles-osl.md notes ~3e-7 between thread counts), so the test asserts agreement
 within noise (per-pixel statistics) and a tight bound on the largest pixel difference.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Catalog models in numpy: reciprocity, sample weights against eval_cos / pdf, the roughness-0
-mirror, and the numerical traps of MODELS.md (no NaN / Inf anywhere)."""
+mirror, and the numerical traps of docs/models.md (no NaN / Inf anywhere)."""
 import math
 
 import numpy as np

@@ -1,6 +1,6 @@
 """Distribution of normals: normalisation of D cos and of the visible-normal pdfs (Smith and
 V-cavity) by deterministic quadrature, the V-cavity pdf identity, exact Beckmann Lambda, the
-delta limit and numerical traps (MODELS.md)."""
+delta limit and numerical traps (docs/models.md)."""
 import math
 
 import numpy as np

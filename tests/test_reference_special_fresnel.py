@@ -1,4 +1,4 @@
-"""Special functions (erf, erfinv, chi-square tail) and the Fresnel spot values of MODELS.md."""
+"""Special functions (erf, erfinv, chi-square tail) and the Fresnel spot values of docs/models.md."""
 import math
 
 import numpy as np

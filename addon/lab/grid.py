@@ -7,7 +7,7 @@ Geometry: an orthographic camera on +z looks down -z, so every pixel sees the vi
 wi = (0, 0, 1) and, on a sphere, exactly one normal n (Cycles renders point-cloud points as exact
 spheres). With a pixel filter of 0.01 px the render samples the pixel centre. Spheres are
 invisible to secondary rays, so a pixel's value is exactly
-    integral f(wi, wo) |wo.n| L(wo) dwo           (CYCLES_OSL.md, "Reference images").
+    integral f(wi, wo) |wo.n| L(wo) dwo           (docs/cycles-osl.md, "Reference images").
 Environments are linear in the direction, L(w) = a + b (w.d), which Blender's world nodes express
 exactly (Texture Coordinate > Generated is the world direction), so the integral reduces to the
 moments of the BSDF: a E(mu) + b (Vn(mu) (d.n) + Vt(mu) (d.t)), t the unit tangent toward wi.

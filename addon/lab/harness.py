@@ -1,7 +1,7 @@
 """Render harness: the sphere grid of addon/lab/grid.py built and rendered headless in Cycles.
 
 One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back with the
-OpenImageIO bundled in bpy (`render`). Settings that silently change results (CYCLES_OSL.md) are
+OpenImageIO bundled in bpy (`render`). Settings that silently change results (docs/cycles-osl.md) are
 pinned: no Filter Glossy, no clamping, caustics on, no adaptive sampling, no denoising, and a
 0.01 px pixel filter so that a pixel sees one normal.
 """

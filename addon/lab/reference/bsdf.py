@@ -144,7 +144,7 @@ def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
     params = MODELS[model_id].resolve(values)
     if model_id == "cook_torrance":
         # Cook & Torrance 1982: f = d R_d + s R_s with Beckmann D, V-cavity G, exact Fresnel;
-        # normalised D (integral D cos = 1) with 4 (n.wi)(n.wo), see MODELS.md sec. 1.
+        # normalised D (integral D cos = 1) with 4 (n.wi)(n.wo), see docs/models.md sec. 1.
         s = params["specular"]
         ax, ay = alphas(params["roughness"])
         return MicrofacetBRDF(

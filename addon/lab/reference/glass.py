@@ -5,13 +5,13 @@ osl/walter_glass.osl (catalog model `walter_glass`).
     f = bsdf.eval(wi, wo)              # RGB, over the whole sphere of wo (not times cos)
     wo, weight, pdf = bsdf.sample(wi, u)
 
-Conventions (shared/design/MODELS.md). Local frame n = (0,0,1); wi.z > 0 (the side wi is on is
+Conventions (docs/models.md). Local frame n = (0,0,1); wi.z > 0 (the side wi is on is
 +z; f is 0 for wi.z <= 0); wo.z > 0 is reflection, wo.z < 0 transmission. `ior` IS the relative
 index eta = n_o / n_i seen from wi's side (n_i = 1 for wi, n_o = eta below the interface); eta < 1
 means wi is in the denser medium (the OSL shader passes 1/ior on back faces). Shapes as
 addon/lab/reference/bsdf.py: directions (..., 3), u (..., 3), RGB (..., 3), pdf (...).
 
-Model (Walter 2007 eqs. 20, 21; MODELS.md sec. 2):
+Model (Walter 2007 eqs. 20, 21; docs/models.md sec. 2):
     f_r = tint F(wi.h_r) G2(wi, wo, h_r) D(h_r) / (4 |wi.n| |wo.n|),   h_r = normalize(wi + wo)
     f_t = tint |wi.h_t| |wo.h_t| / (|wi.n| |wo.n|) eta^2 (1 - F(wi.h_t)) G2 D(h_t)
           / (wi.h_t + eta wo.h_t)^2,                                   h_t = +-normalize(wi + eta wo)

@@ -2,7 +2,7 @@
 the kaleidoscopic closed form of multiple mirror reflection in V-grooves (numpy reference).
 
 Derivation (own geometry, no code of the authors) in docs/lee-asymmetric-grooves.md; ground
-truth: addon/lab/reference/vgroove.py (brute-force tracing). Conventions: MODELS.md (n = (0,0,1),
+truth: addon/lab/reference/vgroove.py (brute-force tracing). Conventions: docs/models.md (n = (0,0,1),
 wi toward the viewer, wo away from the surface, vectors (..., 3)).
 
 2D angles. A groove is seen in its cross-section (the plane of t and n, t horizontal _|_ the
@@ -48,7 +48,7 @@ the 2D
 cosine |sin(phi0 + (j-1) theta_v)|, the 3D cosine is rho times it (the Fresnel argument).
 wo = rho (sin theta_o t + cos theta_o n) - (wi.u) u.
 
-BRDF (symmetric; seed eq. 5-7, MODELS.md):
+BRDF (symmetric; seed eq. 5-7, docs/models.md):
     f(wi, wo) = sum over first walls s and k of
         D(s) |wi.s| G_k prod_j F_j |ds/dwo| / (|wi.n| |wo.n|),
     G_k = (length of the offsets in [max(f_B, 0), f_A] giving k bounces) / f_A,

@@ -2,7 +2,7 @@
 the samplers of microfacet normals. Shaped like pbrt-v4's TrowbridgeReitzDistribution /
 Mitsuba 3's MicrofacetDistribution: one small object holds (distribution, alpha_x, alpha_y).
 
-Conventions (shared/design/MODELS.md): local frame n = (0,0,1); directions are unit numpy arrays
+Conventions (docs/models.md): local frame n = (0,0,1); directions are unit numpy arrays
 of shape (..., 3) that broadcast; scalar results have shape (...). alpha_x acts along the tangent
 (x axis). Below alpha = 1e-7 (both axes) the distribution is a delta (perfect mirror, m = n):
 D, pdf_* are then 0 (not representable as functions), Lambda is 0 and the samplers return n.

@@ -1,6 +1,6 @@
 """Ground truth for Lee et al. 2018: brute-force ray tracing inside V-grooves (numpy).
 
-The microsurface (MODELS.md sec. 4; Heitz 2014 V-cavities) is a set of grooves whose rims all
+The microsurface (docs/models.md sec. 4; Heitz 2014 V-cavities) is a set of grooves whose rims all
 lie in the macro plane z = 0. A groove has a horizontal axis u = n x t and two planar mirror
 walls whose normals lie in the cross-section plane spanned by the horizontal t and n:
   left wall  normal s_l = ( sin(theta_l) t + cos(theta_l) n )   (tilted toward +t)
@@ -18,7 +18,7 @@ the projected (onto the macro plane) area of its two walls, and D(m)(m.n) dm is 
 the fraction of macro area covered by walls with normal in dm; so for symmetric grooves we draw
 s ~ D(s)(s.n) (the groove {s, s'}; D(s) = D(s') so it does not matter which wall was drawn)
 and an entry point uniform on the opening. This is the V-cavity visible-normal rule of
-Heitz 2014 (MODELS.md sec. 3) in disguise: the fraction of the opening from which a ray first
+Heitz 2014 (docs/models.md sec. 3) in disguise: the fraction of the opening from which a ray first
 meets wall s is <wi,s>+ / (<wi,s>+ + <wi,s'>+) (tested in tests/test_reference_lee.py), and
 given that wall the first hit is uniform on its lit part.
 
