@@ -8,7 +8,7 @@ VENV ?= $(HOME)/.cache/microfacet-lab/venv-$(REQ_HASH)
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv test test-fast demo report package clean
+.PHONY: venv test test-fast demo report package thumbnails clean
 
 venv: $(STAMP)
 
@@ -32,6 +32,9 @@ report: venv
 
 package: venv
 	$(PY) scripts/build_package.py
+
+thumbnails: venv
+	$(PY) scripts/render_scene.py --all --thumbnails out/presets
 
 clean:
 	rm -rf out report dist .pytest_cache
