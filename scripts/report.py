@@ -1,7 +1,8 @@
 """`make report`: error against render time, sampler weights, the reference's cost and numerical
 stability of every Microfacet Lab model, and the Lee 2018 V-groove measurements (furnace, cost
 per sample against Cook-Torrance, closed form against the tracer, moment rules), written to
-report/ (report.md, PNG plots, results.json). See addon/lab/report.py.
+report/ (report.md, PNG plots, results.json). See the package addon/lab/report/ (one module per
+section; its __init__ lists them).
 
     python scripts/report.py            # full (about 18-28 min on 2 cores); refreshes docs/figures
     python scripts/report.py --quick    # about 5 minutes

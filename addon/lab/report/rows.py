@@ -1,0 +1,117 @@
+"""The convergence study's rows: model variants x samplers (catalog driven), and Cycles' native
+closures for the same BSDF; which models have a reference, and whose numpy eval is fast."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import grid, stability
+from ...catalog import MODELS
+from .config import GOLD
+
+
+@dataclass
+class Row:
+    key: str  # unique, e.g. "walter_reflection ggx F=1 / vndf"
+    label: str
+    model_id: str | None  # None for a native closure
+    values: dict
+    variant: str  # groups a model variant's samplers with its native closure
+    sampler: str  # sampler item, or "native"
+    native_kind: str | None = None
+
+
+# Model variants whose native Cycles closure is the same BSDF (height-correlated Smith G2).
+VARIANTS = {
+    "cook_torrance": [("Cook-Torrance gold", {"specular": 1.0, **GOLD}, None)],
+    "walter_reflection": [
+        ("Walter GGX F=1", {"distribution": "ggx", "fresnel_type": "none"}, "ggx"),
+        ("Walter Beckmann F=1", {"distribution": "beckmann", "fresnel_type": "none"}, "beckmann"),
+        ("Walter GGX gold", {"distribution": "ggx", **GOLD}, "conductor"),
+    ],
+    "walter_glass": [("Walter GGX glass 1.5", {"distribution": "ggx", "ior": 1.5}, "glass")],
+}
+
+NATIVE_TWIN = {
+    "ggx": ("walter_reflection", {"distribution": "ggx", "fresnel_type": "none"}),
+    "beckmann": ("walter_reflection", {"distribution": "beckmann", "fresnel_type": "none"}),
+    "conductor": ("walter_reflection", {"distribution": "ggx", **GOLD}),
+    "glass": ("walter_glass", {"distribution": "ggx", "ior": 1.5}),
+}
+
+
+def reference_available(model_id: str) -> str:
+    """'' when the numpy twin and the OSL shader exist, else why not."""
+    from ..reference import make_bsdf
+
+    if model_id not in stability.osl_models():
+        return "no OSL shader yet"
+    try:
+        make_bsdf(model_id, {})
+    except Exception as exc:  # noqa: BLE001
+        return f"no numpy reference yet ({type(exc).__name__}: {exc})"
+    # The reference image needs the moment tables: probe them cheaply, with a time limit.
+    from ..reference.quadrature import tabulate_moments
+
+    try:
+        with stability._time_limit(5.0):
+            tabulate_moments(make_bsdf(model_id, {"roughness": 0.5}), n_mu=4, order=2)
+    except stability._Timeout:
+        return "its reference moment tables are too slow for the report (probe > 5 s)"
+    except Exception as exc:  # noqa: BLE001
+        return f"no reference moment tables ({type(exc).__name__}: {exc})"
+    return ""
+
+
+def eval_is_fast(model_id: str, values: dict, limit: float = 0.5) -> bool:
+    """Whether 20,000 evaluations take under `limit` seconds (the sun term needs millions)."""
+    from ..reference import make_bsdf
+
+    rng = np.random.default_rng(0)
+    wi = np.broadcast_to([0.6, 0.0, 0.8], (20000, 3))
+    wo = rng.normal(size=(20000, 3))
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    start = time.perf_counter()
+    try:
+        with stability._time_limit(limit * 4):
+            with np.errstate(all="ignore"):
+                make_bsdf(model_id, {**values, "roughness": 1.0}).eval(wi, wo)
+    except Exception:  # noqa: BLE001 - a timeout or an error: not fast
+        return False
+    return time.perf_counter() - start < limit
+
+
+def build_rows(notes: list) -> list:
+    rows = []
+    for model_id, model in MODELS.items():
+        why = reference_available(model_id)
+        if why:
+            notes.append(f"{model.label}: left out of the convergence study: {why}.")
+            continue
+        variants = VARIANTS.get(model_id, [(model.label, {}, None)])
+        samplers = (model.param("sampler").items
+                    if any(p.id == "sampler" for p in model.params) else (None,))
+        for label, values, native in variants:
+            for s in samplers:
+                v = dict(values, **({"sampler": s} if s else {}))
+                rows.append(Row(f"{label} / {s or 'own'}", label, model_id, v, label, s or "own"))
+            if native:
+                rows.append(Row(f"{label} / native", label, None, {}, label, "native", native))
+    return rows
+
+
+def twin(row: Row) -> tuple:
+    """(model id, values) of the numpy model a row is measured against."""
+    return (row.model_id, row.values) if row.model_id else NATIVE_TWIN[row.native_kind]
+
+
+def specs_for(row: Row, roughness) -> list:
+    """SphereSpecs of a row (for natives: the model variant they stand for, for the reference)."""
+    if row.model_id is not None:
+        return [grid.SphereSpec(row.model_id, {**row.values, "roughness": r}, f"{row.key} r={r}")
+                for r in roughness]
+    model_id, values = NATIVE_TWIN[row.native_kind]
+    return [grid.SphereSpec(model_id, {**values, "roughness": r}, f"{row.key} r={r}")
+            for r in roughness]

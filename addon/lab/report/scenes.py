@@ -1,0 +1,116 @@
+"""Blender scenes of the report: the sun lamp and its calibration, one grid scene per
+environment rendered row by row through a render border, and the GPU (OptiX) device."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import grid
+from ..native import native_source
+from .config import SUN_ANGLE_DEG, SUN_STRENGTH, SUN_WORLD
+from .references import sun_unit
+
+
+def add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG):
+    import bpy
+    import mathutils
+
+    light = bpy.data.lights.new("Microfacet Lab sun", "SUN")
+    light.energy = strength
+    light.angle = math.radians(angle_deg)
+    obj = bpy.data.objects.new("Microfacet Lab sun", light)
+    # A sun lamp shines along its local -Z: point +Z at the sun.
+    obj.rotation_euler = mathutils.Vector(tuple(sun_unit())).to_track_quat("Z", "Y").to_euler()
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def env_for(env_key):
+    return grid.ENVIRONMENTS.get(env_key) or grid.Environment("sun over a dim world", SUN_WORLD)
+
+
+def calibrate_sun(progress) -> dict:
+    """Radiance of the sun lamp as Cycles renders it, read off a mirror sphere (roughness 0,
+    F = 1: deterministic, one sample): pixels whose mirror direction lies in the sun's cone
+    see L_sun + nothing else. Compared with strength / (2 pi (1 - cos(angle / 2)))."""
+    from .. import harness
+
+    half = math.radians(SUN_ANGLE_DEG) / 2.0
+    layout = grid.GridLayout(1, 1, cell_px=160)
+    scene = harness.new_scene()
+    mats = [harness.model_material("walter_reflection", {"roughness": 0.0, "fresnel_type": "none"},
+                                   "sun mirror")]
+    harness.build_grid_scene(layout, mats, env_for("sun"), 1, 0)
+    add_sun(scene)
+    image, _ = harness.render(scene)
+    index, normal, _ = layout.pixel_geometry()
+    wo = 2.0 * normal[..., 2:3] * normal - grid.VIEW
+    cosang = wo @ sun_unit()
+    inside = (index == 0) & (cosang > math.cos(half * 0.95))
+    outside = (index == 0) & (cosang < math.cos(half * 1.05))
+    vals = image[..., 0][inside] - SUN_WORLD
+    formula = SUN_STRENGTH / (2.0 * math.pi * (1.0 - math.cos(half)))
+    result = {"pixels_inside": int(inside.sum()), "formula": formula,
+              "radiance": float(np.median(vals)) if len(vals) else formula,
+              "spread": float(vals.max() - vals.min()) if len(vals) else 0.0,
+              "outside_max": float(np.abs(image[..., 0][outside] - SUN_WORLD).max()),
+              "half_angle": half}
+    progress(f"sun calibration: radiance {result['radiance']:.3f} over {result['pixels_inside']} "
+             f"mirror pixels (2 pi (1 - cos) formula: {formula:.3f})")
+    return result
+
+
+def set_border(scene, layout, row):
+    r = scene.render
+    r.use_border = True
+    r.use_crop_to_border = False
+    r.border_min_x, r.border_max_x = 0.0, 1.0
+    r.border_max_y = 1.0 - row / layout.rows
+    r.border_min_y = 1.0 - (row + 1) / layout.rows
+
+
+def build_env_scene(rows, cfg, env_key, device="CPU"):
+    """One scene per environment: row r of the grid is rows[r], one sphere per roughness."""
+    from .. import harness
+
+    layout = grid.GridLayout(len(rows), len(cfg.roughness), cell_px=cfg.cell_px)
+    scene = harness.new_scene()
+    mats = []
+    for row in rows:
+        for r in cfg.roughness:
+            name = f"{row.key} r={r}"
+            if row.model_id is None:
+                mats.append(harness.osl_material(native_source(row.native_kind, r), name))
+            else:
+                mats.append(harness.model_material(row.model_id, {**row.values, "roughness": r},
+                                                   name))
+    harness.build_grid_scene(layout, mats, env_for(env_key), 1, cfg.seed)
+    if env_key == "sun":
+        add_sun(scene)
+    if device != "CPU":
+        set_gpu(scene, device)
+    scene.render.use_persistent_data = True
+    return scene, layout
+
+
+def optix_devices() -> list:
+    """Names of OptiX devices bpy reports (none on a machine without an NVIDIA GPU)."""
+    try:
+        import bpy
+
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        prefs.refresh_devices()
+        return [d.name for d in prefs.get_devices_for_type("OPTIX")]
+    except Exception:  # noqa: BLE001
+        return []
+
+
+def set_gpu(scene, kind="OPTIX"):
+    import bpy
+
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    prefs.compute_device_type = kind
+    for d in prefs.get_devices_for_type(kind):
+        d.use = True
+    scene.cycles.device = "GPU"
