@@ -17,7 +17,7 @@ from pathlib import Path
 
 import bpy
 
-from . import nodes, presets
+from . import compat, nodes, presets
 
 PRESET_PROP = "microfacet_lab_preset"  # on WindowManager: the panel's gallery selection
 MATERIAL_KEY = "microfacet_lab_preset"  # custom property: the preset a material was made from
@@ -50,8 +50,7 @@ def _material_name(preset) -> str:
 
 
 def _new_material(preset):
-    material = bpy.data.materials.new(_material_name(preset))
-    material.use_nodes = True
+    material = compat.new_node_material(_material_name(preset))
     tree = material.node_tree
     for node in list(tree.nodes):
         tree.nodes.remove(node)

@@ -124,7 +124,9 @@ def compile_script_node(node, model: Model) -> None:
     not). Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no
     sockets and no bytecode; that case is turned into a loud error here.
     """
-    from . import bundled  # noqa: F401  (exposes oslquery / OpenImageIO of the bpy wheel)
+    from . import compat
+
+    compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
 
     text = ensure_text(model)
     node.mode = "INTERNAL"

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import nodes, shaders
+from . import compat, nodes, shaders
 from .catalog import ENUM, MODELS
 
 DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT = (
@@ -213,8 +213,9 @@ def _node_lobes(node) -> set:
 
 def material_lobes(material) -> set:
     lobes = set()
-    if material.use_nodes and material.node_tree is not None:
-        _walk_shader_tree(material.node_tree, lambda tree, node: lobes.update(_node_lobes(node)))
+    tree = compat.node_tree_of(material)
+    if tree is not None:
+        _walk_shader_tree(tree, lambda tree, node: lobes.update(_node_lobes(node)))
     else:
         lobes.update({DIFFUSE, GLOSSY})
     return lobes
@@ -256,11 +257,11 @@ def secondary_hits_possible(scene) -> bool:
 
 
 def world_has_volume(scene) -> bool:
-    world = scene.world
-    if world is None or not world.use_nodes or world.node_tree is None:
+    tree = compat.node_tree_of(scene.world)
+    if tree is None:
         return False
     return any(n.bl_idname == "ShaderNodeOutputWorld" and n.inputs["Volume"].is_linked
-               for n in world.node_tree.nodes)
+               for n in tree.nodes)
 
 
 def bounce_settings(scene) -> dict:

@@ -97,7 +97,7 @@ def test_runtime_modules_are_the_addon_without_the_lab():
     mods = runtime_modules()
     assert {"__init__.py", "addon/__init__.py", "addon/ui.py", "addon/nodes.py",
             "addon/preset_ui.py", "addon/presets.py", "addon/catalog.py", "addon/shaders.py",
-            "addon/specialize.py", "addon/bundled.py"} <= mods, mods
+            "addon/specialize.py", "addon/compat.py"} <= mods, mods
     assert not [m for m in mods if m.startswith("addon/lab/")], mods
     # The closure follows function-level imports (preset_ui imports specialize inside execute).
     assert "addon/specialize.py" in mods

@@ -1,7 +1,8 @@
 """Render harness: the sphere grid of addon/lab/grid.py built and rendered headless in Cycles.
 
-One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back with the
-OpenImageIO bundled in bpy (`render`). Settings that silently change results (docs/cycles-osl.md) are
+One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back
+(`render`, through addon/compat.py: the OpenImageIO bundled in bpy, or Blender's image loader
+where the wheel has none). Settings that silently change results (docs/cycles-osl.md) are
 pinned: no Filter Glossy, no clamping, caustics on, no adaptive sampling, no denoising, and a
 0.01 px pixel filter so that a pixel sees one normal.
 """
@@ -14,9 +15,11 @@ import time
 import bpy
 import numpy as np
 
-from .. import bundled  # noqa: F401  (bundled OpenImageIO and oslquery on sys.path)
+from .. import compat
 from .. import nodes
 from .grid import Environment, GridLayout
+
+compat.expose_bundled_modules()  # oslquery (osl_material compiles raw OSL), OpenImageIO (render)
 
 SPHERE_GROUP = "Microfacet Lab: sphere"
 
@@ -69,7 +72,7 @@ def add_world(scene, env: Environment, light_sampling: bool = True):
     alone: measured, Cycles' native rough glass returns more than 1 in a white furnace with it on
     (1.007 at roughness 0.7, single interface) and matches its own BSDF-only result, and ours,
     with it off."""
-    world = bpy.data.worlds.new(f"Microfacet Lab: {env.name}")
+    world = compat.new_node_world(f"Microfacet Lab: {env.name}")
     if not light_sampling:
         world.cycles.sampling_method = "NONE"
     scene.world = world
@@ -143,7 +146,7 @@ def add_spheres(scene, layout: GridLayout, materials: list, solid: bool = False)
         obj.location = (float(x), float(y), 0.0)
         modifier = obj.modifiers.new("sphere", "NODES")
         modifier.node_group = group
-        modifier[socket_id] = material
+        compat.set_modifier_input(modifier, socket_id, material)
         hidden = ("diffuse", "shadow", "volume_scatter")
         for ray in hidden if solid else hidden + ("glossy", "transmission"):
             setattr(obj, f"visible_{ray}", False)
@@ -153,7 +156,7 @@ def add_spheres(scene, layout: GridLayout, materials: list, solid: bool = False)
 
 
 def _new_material(name: str):
-    material = bpy.data.materials.new(name)
+    material = compat.new_node_material(name)
     tree = material.node_tree
     for node in list(tree.nodes):
         tree.nodes.remove(node)
@@ -247,8 +250,6 @@ def build_grid_scene(layout: GridLayout, materials: list, env: Environment,
 def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
     """Render to an EXR (a temporary one unless `path`), read it back as float32 (H, W, 4),
     row 0 at the top. Returns the image and the render wall time in seconds."""
-    import OpenImageIO as oiio
-
     tmp = None
     if path is None:
         tmp = tempfile.NamedTemporaryFile(suffix=".exr", delete=False)
@@ -258,12 +259,10 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
     start = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     seconds = time.perf_counter() - start
-    pixels = oiio.ImageBuf(path).get_pixels(oiio.FLOAT)
-    if pixels is None or pixels.size == 0:
-        raise RuntimeError(f"could not read the render back from {path}")
+    pixels = compat.read_image(path)
     if tmp is not None:
         os.unlink(path)
-    return np.asarray(pixels, dtype=np.float64), seconds
+    return pixels, seconds
 
 
 def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, cols: int = 4,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import compat
 from ..presets import Preset, load_all
 from . import grid, harness
 from .grid import SphereSpec
@@ -30,7 +31,7 @@ def render_thumbnails(out_dir, presets: list[Preset] | None = None, size: int = 
         row, col = divmod(i, cols)
         tile = image[row * size:(row + 1) * size, col * size:(col + 1) * size, :3]
         path = out_dir / f"{preset.id}.png"
-        write_png(path, linear_to_srgb(tile))
+        compat.write_png(path, linear_to_srgb(tile))
         written.append(path)
         log(f"[thumbnails] wrote {path}")
     return written
@@ -41,19 +42,3 @@ def linear_to_srgb(linear):
 
     x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
-
-
-def write_png(path, rgb) -> None:
-    """Write an (H, W, 3) array in [0, 1] as an 8-bit PNG with the OpenImageIO bundled in bpy."""
-    import numpy as np
-
-    from .. import bundled  # noqa: F401  (puts the bundled OpenImageIO on sys.path)
-    import OpenImageIO as oiio
-
-    data = np.ascontiguousarray(np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
-    spec = oiio.ImageSpec(data.shape[1], data.shape[0], data.shape[2], oiio.UINT8)
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise RuntimeError(f"cannot write {path}: {oiio.geterror()}")
-    out.write_image(data)
-    out.close()

@@ -1,0 +1,116 @@
+"""Differences between the Blender versions the extension supports (4.2 LTS to 5.3), in one place.
+
+Every other module calls these functions instead of testing `bpy.app.version`. Each difference
+is detected by the feature itself where Blender offers a way to ask, and by version otherwise;
+the comment says which Blender changed what. Measured with the pip `bpy` wheels 4.2.23, 4.5.15,
+5.0.1 and 5.3.0.
+"""
+from __future__ import annotations
+
+import bpy
+
+# Blender 5.0: shader node groups take Menu sockets, and the Menu Switch node works in shader
+# trees (4.x offers neither: enums stay integer sockets there).
+MENU_SOCKETS = bpy.app.version >= (5, 0, 0)
+
+
+def expose_bundled_modules() -> None:
+    """Put the wheel's own oslquery and OpenImageIO on sys.path (Blender 4.4+; inside a Blender
+    executable, and in older wheels, there is nothing to expose). Never install the PyPI
+    OpenImageIO beside bpy: a second OpenImageIO breaks oslquery (docs/cycles-osl.md)."""
+    if hasattr(bpy.utils, "expose_bundled_modules"):
+        bpy.utils.expose_bundled_modules()
+
+
+def new_node_material(name: str):
+    """A material with a node tree (before 5.0 a new material has none until use_nodes)."""
+    material = bpy.data.materials.new(name)
+    if material.node_tree is None:
+        material.use_nodes = True
+    return material
+
+
+def new_node_world(name: str):
+    """A world with a node tree (before 5.0 a new world has none until use_nodes)."""
+    world = bpy.data.worlds.new(name)
+    if world.node_tree is None:
+        world.use_nodes = True
+    return world
+
+
+def node_tree_of(idblock):
+    """The node tree a material or world renders with, or None (before 5.0 a tree can exist
+    with use_nodes off, and then it is not used; 5.0 deprecates use_nodes: always on)."""
+    if idblock is None or idblock.node_tree is None:
+        return None
+    return idblock.node_tree if getattr(idblock, "use_nodes", True) else None
+
+
+def set_modifier_input(modifier, identifier: str, value) -> None:
+    """Set a Geometry Nodes modifier's group input (5.3 moved them from ID properties on the
+    modifier to `modifier.properties.inputs.<identifier>.value`)."""
+    properties = getattr(modifier, "properties", None)
+    inputs = getattr(properties, "inputs", None)
+    if inputs is not None and hasattr(inputs, identifier):
+        getattr(inputs, identifier).value = value
+    else:
+        modifier[identifier] = value
+
+
+def has_openimageio() -> bool:
+    """Whether the bundled OpenImageIO can be imported (the pip bpy 4.2 wheel ships none)."""
+    expose_bundled_modules()
+    try:
+        import OpenImageIO  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def read_image(path, use_openimageio: bool | None = None):
+    """An image file as float64 (H, W, C), row 0 at the top, values as stored (EXR: linear).
+    The bundled OpenImageIO reads it where there is one, else Blender's image loader."""
+    import numpy as np
+
+    if use_openimageio is None:
+        use_openimageio = has_openimageio()
+    if use_openimageio:
+        import OpenImageIO as oiio
+
+        pixels = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+        if pixels is None or pixels.size == 0:
+            raise RuntimeError(f"could not read {path}: {oiio.geterror()}")
+        return np.asarray(pixels, dtype=np.float64)
+    image = bpy.data.images.load(str(path), check_existing=False)
+    try:
+        w, h = image.size
+        channels = image.channels
+        if w == 0 or h == 0:
+            raise RuntimeError(f"could not read {path}")
+        if not image.is_float:  # an 8-bit file: keep its stored values, as OpenImageIO does
+            image.colorspace_settings.is_data = True
+        flat = np.empty(w * h * channels, dtype=np.float32)
+        image.pixels.foreach_get(flat)
+        return flat.reshape(h, w, channels)[::-1].astype(np.float64)
+    finally:
+        bpy.data.images.remove(image)
+
+
+def write_png(path, rgb) -> None:
+    """Write an (H, W, 3) array in [0, 1] (row 0 at the top) as an 8-bit PNG, stored as given
+    (no colour transform), with Blender's own image writer (every version has it)."""
+    import numpy as np
+
+    data = np.round(np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0) * 255.0) / 255.0
+    h, w = data.shape[:2]
+    image = bpy.data.images.new("Microfacet Lab PNG", w, h, alpha=False, float_buffer=False)
+    try:
+        image.colorspace_settings.is_data = True
+        rgba = np.ones((h, w, 4), dtype=np.float32)
+        rgba[..., :3] = data[::-1, :, :3]
+        image.pixels.foreach_set(rgba.ravel())
+        image.filepath_raw = str(path)
+        image.file_format = "PNG"
+        image.save()
+    finally:
+        bpy.data.images.remove(image)
