@@ -57,6 +57,19 @@ def set_modifier_input(modifier, identifier: str, value) -> None:
         modifier[identifier] = value
 
 
+def modifier_input_values(modifier) -> list:
+    """The values of a Geometry Nodes modifier's group inputs (see set_modifier_input)."""
+    properties = getattr(modifier, "properties", None)
+    inputs = getattr(properties, "inputs", None)
+    if inputs is not None:
+        group = modifier.node_group
+        items = group.interface.items_tree if group is not None else ()
+        return [getattr(inputs, item.identifier).value for item in items
+                if getattr(item, "in_out", None) == "INPUT" and hasattr(inputs, item.identifier)
+                and hasattr(getattr(inputs, item.identifier), "value")]
+    return [modifier[key] for key in modifier.keys()]
+
+
 def has_openimageio() -> bool:
     """Whether the bundled OpenImageIO can be imported (the pip bpy 4.2 wheel ships none)."""
     expose_bundled_modules()

@@ -171,8 +171,8 @@ def scene_materials(scene) -> list:
                 add(mat)
         for mod in obj.modifiers:
             if mod.type == "NODES":
-                for key in mod.keys():
-                    add(mod[key])
+                for value in compat.modifier_input_values(mod):
+                    add(value)
                 walk_geometry_tree(mod.node_group, set())
     return list(found.values())
 
