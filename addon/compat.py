@@ -97,14 +97,16 @@ def read_image(path, use_openimageio: bool | None = None):
     image = bpy.data.images.load(str(path), check_existing=False)
     try:
         w, h = image.size
-        channels = image.channels
         if w == 0 or h == 0:
             raise RuntimeError(f"could not read {path}")
         if not image.is_float:  # an 8-bit file: keep its stored values, as OpenImageIO does
             image.colorspace_settings.is_data = True
-        flat = np.empty(w * h * channels, dtype=np.float32)
+        # Blender holds every image as RGBA; the file's own channels follow from its depth.
+        in_file = image.depth // (32 if image.is_float else 8)
+        flat = np.empty(w * h * image.channels, dtype=np.float32)
         image.pixels.foreach_get(flat)
-        return flat.reshape(h, w, channels)[::-1].astype(np.float64)
+        pixels = flat.reshape(h, w, image.channels)[::-1, :, :in_file]
+        return pixels.astype(np.float64)
     finally:
         bpy.data.images.remove(image)
 

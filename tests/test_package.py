@@ -142,7 +142,8 @@ INSTALL_SCRIPT = '''
 import os, sys
 zip_path = sys.argv[1]
 import bpy
-bpy.utils.expose_bundled_modules()
+if hasattr(bpy.utils, "expose_bundled_modules"):  # 4.4+ (the add-on does this via its compat)
+    bpy.utils.expose_bundled_modules()
 
 scene = bpy.context.scene
 scene.render.engine = "CYCLES"

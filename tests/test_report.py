@@ -39,7 +39,7 @@ def test_smoke_page_states_machine_versions_and_numbers(smoke):
     assert re.search(r"\[report +[0-9.]+ s\] \(\d+/\d+\) gradient: ", log), log[-2000:]
     assert re.search(r"Generated .* on \d{4}-\d\d-\d\d \d\d:\d\d", page)
     assert re.search(r"Machine: .+, \d+ logical cores", page)
-    assert re.search(r"Blender \(bpy\) \d+\.\d+", page) and "numpy 1." in page
+    assert re.search(r"Blender \(bpy\) \d+\.\d+", page) and re.search(r"numpy \d+\.\d+", page)
     assert "OptiX" in page  # run, or the plain statement that it was not
     # The time table has a time for every row and a ratio for every row with a native closure.
     time_table = page.split("Time to 1% relative RMSE")[1].split("Relative RMSE at")[0]
