@@ -1,25 +1,41 @@
 # Microfacet Lab. Two set-up commands on a fresh machine: `make demo` and `make test`.
-# Both create (once) a pinned Python 3.11 virtual environment in a cache directory outside the
-# clone, keyed by the hash of requirements.txt, so fresh clones reuse it.
+# Each Blender version gets its own pinned virtual environment, created once by scripts/venv.sh
+# in a cache directory outside the clone (~/.cache/microfacet-lab), keyed by the hash of its
+# requirements file, so fresh clones reuse it:
+#   requirements.txt                    the current release (bpy 5.3.0, Python 3.13): demo, test,
+#                                       report, package
+#   tests/compat/requirements-<v>.txt   the other supported lines (4.2 LTS, 4.5 LTS, 5.0,
+#                                       Python 3.11): the compatibility suite of make test
 SHELL := /bin/bash
-PYTHON_BASE ?= python3.11
-REQ_HASH := $(shell sha256sum requirements.txt | cut -c1-12)
-VENV ?= $(HOME)/.cache/microfacet-lab/venv-$(REQ_HASH)
-PY := $(VENV)/bin/python
-STAMP := $(VENV)/.installed
+.SHELLFLAGS := -euo pipefail -c
 
-.PHONY: venv test test-fast demo report package thumbnails clean
+VENV_SH := scripts/venv.sh
+PY = $$($(VENV_SH) requirements.txt)
+COMPAT ?= 4.2 4.5 5.0
+# The compatibility suite: install the zip, build every node group and check it compiled, apply
+# and render every preset, a white-furnace sphere against the numpy reference, the CLI.
+COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py tests/test_harness.py
 
-venv: $(STAMP)
+.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails clean
 
-$(STAMP): requirements.txt
-	@command -v $(PYTHON_BASE) >/dev/null || { echo "error: $(PYTHON_BASE) not found (bpy 5.0.1 needs Python 3.11)"; exit 1; }
-	@test -x $(PY) || $(PYTHON_BASE) -m venv $(VENV)
-	$(PY) -m pip install -q --disable-pip-version-check -r requirements.txt
-	@touch $(STAMP)
+venv:
+	@$(VENV_SH) requirements.txt >/dev/null
 
-test: venv
+venvs: venv
+	@for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt >/dev/null; done
+
+test: test-full test-compat
+
+test-full: venv
+	@py=$(PY); echo "== full suite on Blender $$($$py -c 'import bpy; print(bpy.app.version_string)')"
 	$(PY) -m pytest -q -ra --durations=15 tests
+
+test-compat: venvs
+	@for v in $(COMPAT); do \
+	  py=$$($(VENV_SH) tests/compat/requirements-$$v.txt); \
+	  echo "== compatibility suite on Blender $$($$py -c 'import bpy; print(bpy.app.version_string)')"; \
+	  $$py -m pytest -q -ra -p no:cacheprovider $(COMPAT_TESTS); \
+	done
 
 test-fast: venv
 	$(PY) -m pytest -q -ra -m "not render" tests
