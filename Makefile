@@ -16,7 +16,7 @@ COMPAT ?= 4.2 4.5 5.0
 # and render every preset, a white-furnace sphere against the numpy reference, the CLI.
 COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py tests/test_harness.py
 
-.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails clean
+.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace clean
 
 venv:
 	@$(VENV_SH) requirements.txt >/dev/null
@@ -51,6 +51,9 @@ package: venv
 
 thumbnails: venv
 	$(PY) scripts/render_scene.py --all --thumbnails out/presets
+
+lee-furnace: venv
+	$(PY) scripts/lee_furnace.py
 
 clean:
 	rm -rf out report dist .pytest_cache
