@@ -5,8 +5,13 @@ tests are all driven from MODELS below. Imports nothing but the standard library
 without bpy.
 
 Parameter ids are the OSL shader parameter names and the keys of the reference's parameter dicts;
-labels are what the user sees on the node group. Enums are passed to OSL as ints (their index in
-`items`), so an unlinked enum is a constant the OSL compiler folds away (docs/cycles-osl.md).
+labels are what the user sees on the node group (and the socket names everywhere). Enums are
+passed to OSL as ints (their index in `items`), so an unlinked enum is a constant the OSL compiler
+folds away (docs/cycles-osl.md); the node shows them as menus of the items' display labels
+(`ENUM_ITEMS`) where Blender has menu sockets in shader node groups.
+
+`doc` is what the artist reads: the socket tooltip, the node group's description. It says in
+plain words what the input does to the look; the formulas behind it are in docs/models.md.
 """
 from __future__ import annotations
 
@@ -14,6 +19,10 @@ import math
 from dataclasses import dataclass, field
 
 FLOAT, COLOR, ENUM = "float", "color", "enum"
+# How a parameter is shown on the node (Param.socket), where its kind alone does not say:
+# FACTOR: a float as a 0-1 slider; VECTOR: a colour-kind (RGB) value as three plain numbers, as
+# Blender's Metallic BSDF shows its complex IOR (values far above 1 are the point there).
+FACTOR, VECTOR = "FACTOR", "VECTOR"
 
 
 @dataclass(frozen=True)
@@ -27,10 +36,25 @@ class Param:
     max: float | None = None
     items: tuple[str, ...] = ()
     doc: str = ""
+    socket: str = ""  # FACTOR, VECTOR or "" (the kind's own socket)
 
     def index(self, item: str) -> int:
         """OSL int code of an enum item."""
         return self.items.index(item)
+
+    @property
+    def item_labels(self) -> tuple[str, ...]:
+        """Display labels of an enum's items, in code order (the menu's entries)."""
+        return tuple(ITEM_LABELS[self.id][item] for item in self.items)
+
+    def item_label(self, item: str) -> str:
+        """The display label of an enum item (given by id)."""
+        if item not in self.items:
+            raise ValueError(f"{self.label}: {item!r} is not one of {self.items}")
+        return ITEM_LABELS[self.id][item]
+
+    def item_doc(self, item: str) -> str:
+        return ITEM_DOCS[self.id][item]
 
     def clamp(self, value):
         """The documented clamp: NaN -> default, then [min, max], per channel for colours."""
@@ -92,33 +116,83 @@ class Model:
 
 
 # Shared parameters ------------------------------------------------------------------------
-# Roughness as in Cycles: alpha = roughness^2. Roughness 0 is a perfect mirror (delta lobe).
-ROUGHNESS = Param("roughness", "Roughness", FLOAT, 0.5, 0.0, 1.0,
-                  doc="Cycles roughness r; alpha = r^2. 0 is a perfect mirror.")
+# Roughness as in Cycles: alpha = roughness^2 (docs/models.md, Conventions). 0 is a perfect
+# mirror (delta lobe).
+ROUGHNESS = Param("roughness", "Roughness", FLOAT, 0.5, 0.0, 1.0, socket=FACTOR,
+                  doc="Microsurface roughness: 0 is a mirror, higher values blur reflections into "
+                      "a wider, dimmer highlight, 1 is very rough.")
 IOR = Param("ior", "IOR", FLOAT, 1.5, 0.01, 100.0,
-            doc="Relative index of refraction eta = n_t / n_i of a dielectric. NaN -> 1.5.")
+            doc="Index of refraction of a non-metal (1.33 water, 1.5 glass or plastic, 2.42 "
+                "diamond): higher values reflect more, most visibly when the surface faces you. "
+                "Used when Fresnel is Dielectric.")
 # Gold at R 650 nm, G 550 nm, B 450 nm (Johnson & Christy 1972, PRB 6, 4370; interpolated).
+# Real and imaginary part of the complex IOR n + ik, per RGB channel (docs/models.md, sec. 1).
 CONDUCTOR_N = Param("n", "N (complex IOR)", COLOR, (0.156, 0.424, 1.38), 0.001, 100.0,
-                    doc="Real part n of a conductor's complex IOR n + ik, per RGB channel.")
+                    socket=VECTOR,
+                    doc="Refractive index of a metal for red, green and blue, as measured "
+                        "(with K it gives the metal its colour; the presets cite their "
+                        "sources). Used when Fresnel is Conductor.")
 CONDUCTOR_K = Param("k", "K (extinction)", COLOR, (3.602, 2.472, 1.914), 0.0, 100.0,
-                    doc="Imaginary part k of a conductor's complex IOR, per RGB channel.")
-TINT = Param("base_color", "Color", COLOR, (1.0, 1.0, 1.0), 0.0, 1.0,
-             doc="Multiplies the specular lobe (1 is physical).")
+                    socket=VECTOR,
+                    doc="Extinction coefficient of a metal for red, green and blue, as measured: "
+                        "higher values make that colour reflect more strongly. Used when Fresnel "
+                        "is Conductor.")
+# The weight multiplies the specular lobe (white is physical).
+TINT = Param("base_color", "Specular Tint", COLOR, (1.0, 1.0, 1.0), 0.0, 1.0,
+             doc="Colours the reflection; white is physically correct, darker or coloured "
+                 "values are an artistic departure.")
 
-# Every enum, with its items in OSL code order. A model's enum offers a prefix of these items,
-# so one item has one int code in every shader; the add-on generates the OSL #defines
-# (MFL_<ENUM>_<ITEM>) from this table.
-ENUMS: dict[str, tuple[str, ...]] = {
-    "distribution": ("ggx", "beckmann"),
-    "masking": ("height_correlated", "separable"),
-    "fresnel_type": ("conductor", "dielectric", "none"),
-    "sampler": ("dcos", "vndf", "vcavity"),
-    "groove": ("symmetric", "asymmetric"),
+# Every enum item, in OSL code order: (id, display label, what it does). A model's enum offers
+# a prefix of these items, so one item has one int code in every shader; the add-on generates
+# the OSL #defines (MFL_<ENUM>_<ITEM>) from the ids, the node's menus show the labels.
+ENUM_ITEMS: dict[str, tuple[tuple[str, str, str], ...]] = {
+    "distribution": (
+        ("ggx", "GGX", "Bright core with long soft tails, as Cycles' default glossy"),
+        ("beckmann", "Beckmann", "A tighter highlight that fades quickly at its edge"),
+    ),
+    "masking": (
+        ("height_correlated", "Height-correlated",
+         "Shadowing between microfacets as Cycles computes it"),
+        ("separable", "Separable",
+         "Shadowing as in the 2007 paper: a little darker at grazing angles on rough surfaces"),
+    ),
+    "fresnel_type": (
+        ("conductor", "Conductor", "A metal, coloured by N and K"),
+        ("dielectric", "Dielectric", "A non-metal such as plastic, lacquer or glass, set by IOR"),
+        ("none", "None", "No Fresnel effect: full-strength reflection at every angle"),
+    ),
+    "sampler": (
+        ("dcos", "D·cos (Walter 2007)", "The original 2007 sampling: noisier, most of all at "
+                                        "grazing angles"),
+        ("vndf", "Visible normals (Heitz 2014)", "Samples only the facets facing the viewer: "
+                                                 "least noise for the Walter models"),
+        ("vcavity", "V-cavity visible normals", "The same for V-shaped cavities: least noise "
+                                                "for Cook-Torrance"),
+    ),
+    "groove": (
+        ("symmetric", "Symmetric", "Both walls of a groove slope alike"),
+        ("asymmetric", "Asymmetric", "The walls of a groove slope independently"),
+    ),
 }
+ENUMS: dict[str, tuple[str, ...]] = {
+    enum: tuple(item for item, _, _ in entries) for enum, entries in ENUM_ITEMS.items()}
+ITEM_LABELS: dict[str, dict[str, str]] = {
+    enum: {item: label for item, label, _ in entries} for enum, entries in ENUM_ITEMS.items()}
+ITEM_DOCS: dict[str, dict[str, str]] = {
+    enum: {item: doc for item, _, doc in entries} for enum, entries in ENUM_ITEMS.items()}
 SAMPLERS = ENUMS["sampler"]
-SAMPLER_DOC = ("dcos: Walter 2007, m ~ D(m)(m.n); vndf: Heitz & d'Eon 2014 visible normals of the "
-               "Smith microsurface; vcavity: visible normals of the V-cavity microsurface "
-               "(Heitz 2014, seed fig. 14)")
+# The samplers' formulas: docs/models.md, sec. 3.
+SAMPLER_DOC = ("How reflection directions are picked at random: changes the noise and render "
+               "time, not the converged look. Visible normals gives the least noise.")
+DISTRIBUTION_DOC = ("Shape of the highlight: GGX has a bright core with long soft tails, "
+                    "Beckmann a tighter highlight that fades quickly.")
+FRESNEL_DOC = ("How reflection strength changes with the viewing angle: Conductor for metals "
+               "(set by N and K), Dielectric for non-metals (set by IOR), None reflects at full "
+               "strength everywhere.")
+# Smith G2, height-correlated (Heitz 2014, Cycles, pbrt-v4) or separable (Walter 2007):
+# docs/models.md, sec. 2.
+MASKING_DOC = ("How microfacets shadow one another: Height-correlated as in Cycles, or Separable "
+               "as in the 2007 paper (a little darker at grazing angles on rough surfaces).")
 
 MODELS: dict[str, Model] = {}
 
@@ -132,103 +206,117 @@ def _add(model: Model) -> Model:
     return model
 
 
+# Formulas: docs/models.md, sec. 1 (f = d R_d + s R_s, s + d = 1, Beckmann D, V-cavity G, exact
+# Fresnel, Lambertian R_d by the native diffuse()).
 COOK_TORRANCE = _add(Model(
     id="cook_torrance",
     label="Microfacet Cook-Torrance (1982)",
     year=1982,
     shader="cook_torrance",
     tags=("diffuse", "glossy"),
-    doc="f = d R_d + s R_s, s + d = 1; R_s = F D G / (4 (n.wi)(n.wo)) with Beckmann D, "
-        "V-cavity G (Torrance-Sparrow) and exact Fresnel; R_d Lambertian (native diffuse()).",
+    doc="Cook-Torrance (1982): a glossy highlight over a matte diffuse base, for plastics, "
+        "paints and rubber, or tarnished metals with the Conductor Fresnel.",
     params=(
-        Param("base_color", "Color", COLOR, (0.8, 0.8, 0.8), 0.0, 1.0, doc="Diffuse colour of R_d."),
-        Param("specular", "Specular", FLOAT, 0.5, 0.0, 1.0,
-              doc="Specular fraction s; the diffuse fraction is d = 1 - s."),
+        Param("base_color", "Diffuse Color", COLOR, (0.8, 0.8, 0.8), 0.0, 1.0,
+              doc="Colour of the matte (diffuse) part under the glossy reflection."),
+        Param("specular", "Specular", FLOAT, 0.5, 0.0, 1.0, socket=FACTOR,
+              doc="Share of the glossy reflection against the diffuse colour: 0 is fully "
+                  "matte, 1 fully glossy; the two shares always add up to one."),
         ROUGHNESS,
         Param("fresnel_type", "Fresnel", ENUM, "dielectric", items=ENUMS["fresnel_type"][:2],
-              doc="Exact conductor Fresnel with N, K, or exact dielectric Fresnel with IOR."),
+              doc="How reflection strength changes with the viewing angle: Conductor for "
+                  "metals (set by N and K), Dielectric for non-metals (set by IOR)."),
         IOR, CONDUCTOR_N, CONDUCTOR_K,
-        Param("sampler", "Sampler", ENUM, "vcavity", items=SAMPLERS, doc=SAMPLER_DOC),
+        Param("sampler", "Sampler", ENUM, "vcavity", items=SAMPLERS,
+              doc="How reflection directions are picked at random: changes the noise and "
+                  "render time, not the converged look. V-cavity visible normals gives the "
+                  "least noise for this model."),
     ),
 ))
 
+# Formulas: docs/models.md, sec. 2 (reflection), and Conventions (anisotropy as in Cycles).
 WALTER_REFLECTION = _add(Model(
     id="walter_reflection",
     label="Microfacet Reflection (Walter 2007)",
     year=2007,
     shader="walter_reflection",
     tags=("glossy",),
-    doc="f_r = F G2 D / (4 |wi.n| |wo.n|) with GGX or Beckmann D, separable or "
-        "height-correlated Smith G2, and exact Fresnel.",
+    doc="Walter (2007) glossy reflection for metals, coatings and lacquers: a GGX or Beckmann "
+        "highlight, round or stretched, with metal, non-metal or no Fresnel.",
     params=(
         TINT,
         ROUGHNESS,
-        Param("anisotropy", "Anisotropy", FLOAT, 0.0, 0.0, 1.0,
-              doc="As Cycles: aspect = sqrt(1 - 0.9 a); alpha_x = r^2 / aspect, "
-                  "alpha_y = r^2 aspect, along the surface tangent."),
-        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"]),
-        Param("masking", "Masking", ENUM, "height_correlated",
-              items=ENUMS["masking"],
-              doc="Smith G2: height-correlated 1/(1+L(wi)+L(wo)) (Heitz 2014, Cycles) or "
-                  "separable G1(wi) G1(wo) (Walter 2007)."),
+        Param("anisotropy", "Anisotropy", FLOAT, 0.0, 0.0, 1.0, socket=FACTOR,
+              doc="Stretches the highlight along the surface tangent, as on brushed metal: 0 "
+                  "is round, 1 strongly stretched."),
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"],
+              doc=DISTRIBUTION_DOC),
+        Param("masking", "Masking", ENUM, "height_correlated", items=ENUMS["masking"],
+              doc=MASKING_DOC),
         Param("fresnel_type", "Fresnel", ENUM, "conductor", items=ENUMS["fresnel_type"],
-              doc="Exact conductor (N, K), exact dielectric (IOR), or none (F = 1)."),
+              doc=FRESNEL_DOC),
         IOR, CONDUCTOR_N, CONDUCTOR_K,
         Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
     ),
 ))
 
 
+# Formulas: docs/models.md, sec. 2 (glass: Walter's BTDF, Cycles' transport convention, total
+# internal reflection, index matching).
 WALTER_GLASS = _add(Model(
     id="walter_glass",
     label="Microfacet Glass (Walter 2007)",
     year=2007,
     shader="walter_glass",
     tags=("glossy", "transmission", "transparent"),
-    doc="Rough dielectric interface: f_r = F G2 D / (4 |wi.n| |wo.n|) plus Walter's BTDF "
-        "f_t = |wi.h||wo.h| / (|wi.n||wo.n|) n_o^2 (1 - F) G2 D / (n_i wi.h + n_o wo.h)^2, "
-        "GGX or Beckmann D, separable or height-correlated G2, exact Fresnel with total "
-        "internal reflection; Cycles' transport convention (no 1/eta^2 factor). IOR 1 is a "
-        "clean pass-through; roughness 0 is perfect glass.",
+    doc="Walter (2007) rough glass: reflects and refracts light, from clear (roughness 0) to "
+        "frosted; IOR 1 makes the surface vanish.",
     params=(
-        TINT,
+        # Multiplies both lobes (and the pass-through at IOR 1): not a specular-only tint.
+        Param("base_color", "Tint", COLOR, (1.0, 1.0, 1.0), 0.0, 1.0,
+              doc="Colours the light the glass reflects and lets through; white is physically "
+                  "correct."),
         ROUGHNESS,
-        IOR,
-        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"]),
+        Param("ior", "IOR", FLOAT, 1.5, 0.01, 100.0,
+              doc="Index of refraction (1.33 water, 1.5 glass, 2.42 diamond): higher values "
+                  "bend light more and reflect more; 1 makes the surface invisible, below 1 "
+                  "it behaves as seen from inside the glass."),
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"],
+              doc=DISTRIBUTION_DOC),
         Param("masking", "Masking", ENUM, "height_correlated", items=ENUMS["masking"],
-              doc="Smith G2 for both lobes: height-correlated 1/(1+L(wi)+L(wo)) (as Cycles and "
-                  "pbrt-v4) or separable G1(wi) G1(wo) (Walter 2007)."),
+              doc=MASKING_DOC),
         Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
     ),
 ))
 
 
+# Formulas: docs/models.md, sec. 4, and docs/lee-asymmetric-grooves.md.
 LEE_VGROOVE = _add(Model(
     id="lee_vgroove",
     label="Microfacet Multi-Bounce V-Groove (Lee 2018)",
     year=2018,
     shader="lee_vgroove",
     tags=("glossy",),
-    doc="Kaleidoscopic multiple mirror reflection inside V-grooves (Lee, Jarabo, Jeon, Gutierrez, "
-        "Kim 2018): a groove and an entry point are sampled, the bounce count and the exit "
-        "direction follow in closed form, and the sample carries the product of the exact "
-        "Fresnel terms of its bounces. With F = 1 every sample weighs exactly 1 (no energy "
-        "loss at any roughness). Derivation: docs/lee-asymmetric-grooves.md.",
+    doc="Lee (2018) multi-bounce reflection: light bounces between the walls of tiny V-grooves, "
+        "so rough metals keep their brightness and deepen their colour instead of turning "
+        "dark; with no Fresnel it loses no energy at any roughness.",
     params=(
         TINT,
         ROUGHNESS,
-        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"]),
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"],
+              doc="Spread of the groove slopes: GGX has a bright core with long soft tails, "
+                  "Beckmann a tighter highlight that fades quickly."),
         Param("groove", "Groove", ENUM, "symmetric", items=ENUMS["groove"],
-              doc="symmetric: both walls drawn from D (Heitz's V-cavities); asymmetric: the "
-                  "partner wall from the size-biased law D(theta) sin^2(theta), which keeps "
-                  "the projected-area distribution of normals equal to D."),
+              doc="Shape of the grooves: Symmetric (both walls slope alike) or Asymmetric "
+                  "(the walls slope independently); both keep the same overall roughness."),
         Param("fresnel_type", "Fresnel", ENUM, "conductor", items=ENUMS["fresnel_type"],
-              doc="Exact conductor (N, K), exact dielectric (IOR), or none (F = 1), per bounce."),
+              doc=FRESNEL_DOC + " Applied at every bounce."),
         IOR, CONDUCTOR_N, CONDUCTOR_K,
+        # 0: kmax from the roughness (docs/models.md, sec. 4, "Bounce bound").
         Param("max_bounces", "Max Bounces", FLOAT, 0.0, 0.0, 1000.0,
-              doc="0 = derived from the roughness (paths beyond carry < 1e-4 of the energy); "
-                  "otherwise the Fresnel loop stops at this count (later bounces count as "
-                  "F = 1; the exit direction is always exact)."),
+              doc="How many bounces inside a groove get their Fresnel colour: 0 chooses from "
+                  "the roughness; a low limit renders faster but leaves later bounces "
+                  "uncoloured, so deep grooves come out brighter and paler."),
     ),
 ))
 

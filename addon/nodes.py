@@ -1,61 +1,132 @@
 """Node groups, one per model, built from the catalog.
 
-Each group exposes the model's parameters as sockets (enums as integer sockets whose tooltip
-lists the items) and wraps a compiled INTERNAL Script node. Unlinked group inputs reach OSL as
-constants, so switches on them are folded away by the OSL compiler.
+Each group exposes the model's parameters as sockets and wraps a compiled INTERNAL Script node:
+
+- enums as menus of the items' display labels where Blender has menu sockets in shader node
+  groups (5.0+, `compat.MENU_SOCKETS`): the group's Menu input feeds a Menu Switch (data type
+  INT) whose items hold the OSL int codes, and its output feeds the Script node's int input.
+  Older versions get integer sockets whose tooltip lists the codes;
+- 0-1 parameters (Param.socket FACTOR) as factor sliders, the others as plain floats with the
+  catalog's range as the socket's min/max;
+- N and K (Param.socket VECTOR) as vectors, as Blender's Metallic BSDF shows its complex IOR
+  (the OSL parameter stays a color; the link converts), colours as colour swatches.
+
+A menu socket is always a constant: Blender resolves the Menu Switch before Cycles sees the tree,
+so the Script node gets the same constant int as an unlinked integer socket and the OSL compiler
+folds the switches on it (measured: identical OSL runtime-optimizer statistics and pixels,
+tests/test_nodes.py). Typed-in values outside the range are not refused by Blender; the shader
+clamps them (addon/shaders.py).
 """
 from __future__ import annotations
 
 import bpy
 
-from . import shaders
-from .catalog import COLOR, ENUM, MODELS, Model
+from . import compat, shaders
+from .catalog import COLOR, ENUM, FACTOR, MODELS, VECTOR, Model, Param
 
 GROUP_PREFIX = "Microfacet Lab: "
 SCRIPT_NODE_NAME = "Microfacet Lab OSL"
+MENU_NODE_PREFIX = "Microfacet Lab menu: "  # + the parameter id
 
 
 def group_name(model: Model) -> str:
     return GROUP_PREFIX + model.label
 
 
-def _new_input(group, param):
+def socket_type(param: Param, menus: bool | None = None) -> str:
+    """The interface socket type that shows `param` (menus: None follows compat.MENU_SOCKETS)."""
+    if param.kind == ENUM:
+        return "NodeSocketMenu" if (compat.MENU_SOCKETS if menus is None else menus) \
+            else "NodeSocketInt"
     if param.kind == COLOR:
-        sock = group.interface.new_socket(param.label, in_out="INPUT", socket_type="NodeSocketColor")
+        return "NodeSocketVector" if param.socket == VECTOR else "NodeSocketColor"
+    return "NodeSocketFloat"
+
+
+def _new_input(group, param: Param, menus: bool):
+    kind = socket_type(param, menus)
+    sock = group.interface.new_socket(param.label, in_out="INPUT", socket_type=kind)
+    description = param.doc
+    if kind == "NodeSocketColor":
         sock.default_value = (*param.default, 1.0)
-    elif param.kind == ENUM:
-        sock = group.interface.new_socket(param.label, in_out="INPUT", socket_type="NodeSocketInt")
+    elif kind == "NodeSocketVector":
+        sock.default_value = tuple(param.default)
+        sock.min_value, sock.max_value = param.min, param.max
+    elif kind == "NodeSocketInt":
         sock.default_value = param.index(param.default)
         sock.min_value, sock.max_value = 0, len(param.items) - 1
-    else:
-        sock = group.interface.new_socket(param.label, in_out="INPUT", socket_type="NodeSocketFloat")
+        codes = ", ".join(f"{i} {label}" for i, label in enumerate(param.item_labels))
+        description = f"{description} ({codes})"
+    elif kind == "NodeSocketFloat":
+        if param.socket == FACTOR:
+            sock.subtype = "FACTOR"
         sock.default_value = param.default
         sock.min_value, sock.max_value = param.min, param.max
-    codes = ", ".join(f"{i} {item}" for i, item in enumerate(param.items))
-    sock.description = (param.doc + (f" ({codes})" if codes else "")).strip()
+    # NodeSocketMenu: its items come from the Menu Switch it feeds, so its default is set once
+    # that link exists (build_group).
+    sock.description = description.strip()
     return sock
 
 
-def build_group(model: Model):
-    """Create the model's node group from scratch (replacing one of the same name)."""
-    old = bpy.data.node_groups.get(group_name(model))
-    if old is not None:
-        bpy.data.node_groups.remove(old)
-    group = bpy.data.node_groups.new(group_name(model), "ShaderNodeTree")
+def _menu_switch(group, param: Param):
+    """A Menu Switch (INT) with one item per enum item, named by its label, holding its code."""
+    switch = group.nodes.new("GeometryNodeMenuSwitch")
+    switch.name = MENU_NODE_PREFIX + param.id
+    switch.label = param.label
+    switch.data_type = "INT"
+    items = switch.enum_items
+    while len(items) > len(param.items):
+        items.remove(items[len(items) - 1])
+    while len(items) < len(param.items):
+        items.new(param.item_labels[len(items)])
+    for code, (item, label) in enumerate(zip(param.items, param.item_labels)):
+        items[code].name = label
+        items[code].description = param.item_doc(item)
+    for code, sock in enumerate(s for s in switch.inputs if s.identifier.startswith("Item_")):
+        sock.default_value = code
+    return switch
+
+
+def build_group(model: Model, menus: bool | None = None):
+    """Build the model's node group from the catalog. A group of the same name is rebuilt in
+    place, so group nodes already using it stay attached to it.
+
+    `menus` (None: compat.MENU_SOCKETS) chooses menu or integer sockets for the enums; menus
+    need Blender 5.0+."""
+    menus = compat.MENU_SOCKETS if menus is None else menus
+    group = bpy.data.node_groups.get(group_name(model))
+    if group is None:
+        group = bpy.data.node_groups.new(group_name(model), "ShaderNodeTree")
+    else:
+        group.nodes.clear()
+        group.interface.clear()
     group.description = model.doc
+    group.color_tag = "SHADER"
     for param in model.params:
-        _new_input(group, param)
+        _new_input(group, param, menus)
     group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
 
     group_in = group.nodes.new("NodeGroupInput")
     group_out = group.nodes.new("NodeGroupOutput")
     script = group.nodes.new("ShaderNodeScript")
     script.name = script.label = SCRIPT_NODE_NAME
-    group_in.location, script.location, group_out.location = (-400, 0), (0, 0), (300, 0)
+    group_in.location, script.location, group_out.location = (-500, 0), (0, 0), (300, 0)
     shaders.compile_script_node(script, model)
+    menu_row = 0
     for param in model.params:
-        group.links.new(group_in.outputs[param.label], script.inputs[shaders.osl_input_name(param)])
+        source = group_in.outputs[param.label]
+        if param.kind == ENUM and menus:
+            switch = _menu_switch(group, param)
+            switch.location = (-250, 200 - 120 * menu_row)
+            menu_row += 1
+            group.links.new(source, switch.inputs["Menu"])
+            source = switch.outputs[0]
+        group.links.new(source, script.inputs[shaders.osl_input_name(param)])
     group.links.new(script.outputs["BSDF"], group_out.inputs["BSDF"])
+    if menus:  # the menus know their items now
+        for param in model.params:
+            if param.kind == ENUM:
+                group.interface.items_tree[param.label].default_value = param.item_label(param.default)
     return group
 
 
@@ -63,14 +134,20 @@ def ensure_group(model_id: str):
     """The model's node group, built once per file and reused."""
     model = MODELS[model_id]
     group = bpy.data.node_groups.get(group_name(model))
-    if group is None or not _is_valid(group):
+    if group is None or not _is_valid(group, model):
         group = build_group(model)
     return group
 
 
-def _is_valid(group) -> bool:
+def _is_valid(group, model: Model) -> bool:
+    """Compiled, and with an input for every catalog label (a group saved before a label
+    changed is rebuilt; one with integer instead of menu sockets still works, see set_inputs)."""
     script = group.nodes.get(SCRIPT_NODE_NAME)
-    return script is not None and bool(script.bytecode) and len(script.outputs) > 0
+    if script is None or not script.bytecode or len(script.outputs) == 0:
+        return False
+    inputs = [s.name for s in group.interface.items_tree
+              if getattr(s, "in_out", None) == "INPUT"]
+    return inputs == [p.label for p in model.params]
 
 
 def add_group_node(node_tree, model_id: str, values: dict | None = None):
@@ -87,12 +164,20 @@ def add_group_node(node_tree, model_id: str, values: dict | None = None):
     return node
 
 
+def socket_value(sock, param: Param, value):
+    """What `sock` holds for the catalog value `value` (resolved: enum items by id): the item's
+    label on a menu socket, its int code on an integer socket; RGB on a vector socket, RGBA on a
+    colour socket."""
+    if param.kind == ENUM:
+        return param.item_label(value) if sock.type == "MENU" else param.index(value)
+    if param.kind == COLOR:
+        return tuple(value) if sock.type == "VECTOR" else (*value, 1.0)
+    return value
+
+
 def set_inputs(node, model: Model, resolved: dict) -> None:
+    """Set a group node's inputs from resolved catalog values (enum items by id, e.g.
+    "beckmann"), whichever socket types its group has (menus or integers)."""
     for param in model.params:
-        value = resolved[param.id]
-        if param.kind == COLOR:
-            node.inputs[param.label].default_value = (*value, 1.0)
-        elif param.kind == ENUM:
-            node.inputs[param.label].default_value = param.index(value)
-        else:
-            node.inputs[param.label].default_value = value
+        sock = node.inputs[param.label]
+        sock.default_value = socket_value(sock, param, resolved[param.id])

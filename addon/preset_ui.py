@@ -13,11 +13,13 @@ every class, the WindowManager property and the thumbnail previews it added.
 """
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import bpy
 
 from . import compat, nodes, presets
+from .ui import osl_render_problem
 
 PRESET_PROP = "microfacet_lab_preset"  # on WindowManager: the panel's gallery selection
 MATERIAL_KEY = "microfacet_lab_preset"  # custom property: the preset a material was made from
@@ -177,9 +179,10 @@ class MATERIAL_OT_microfacet_lab_apply_preset(bpy.types.Operator):
         except Exception as error:  # a shader that does not compile: reported, not raised
             self.report({"ERROR"}, f"Microfacet Lab preset {preset.id}: {error}")
             return {"CANCELLED"}
-        if context.scene.render.engine != "CYCLES":
-            self.report({"WARNING"}, "Microfacet Lab shaders are OSL: they render in Cycles")
         self.report({"INFO"}, f"{action} {material.name!r} from preset {preset.id!r}")
+        problem = osl_render_problem(context.scene)
+        if problem:
+            self.report({"WARNING"}, problem)
         return {"FINISHED"}
 
 
@@ -224,6 +227,11 @@ class MATERIAL_PT_microfacet_lab_presets(bpy.types.Panel):
         layout = self.layout
         cache = refresh()
         wm = context.window_manager
+        problem = osl_render_problem(context.scene)
+        if problem:
+            box = layout.box().column(align=True)
+            for i, line in enumerate(textwrap.wrap(problem, 48)):
+                box.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
         if any(item[3] for item in cache["items"]):
             layout.template_icon_view(wm, PRESET_PROP, show_labels=True, scale=5.0)
         layout.prop(wm, PRESET_PROP, text="")

@@ -6,6 +6,35 @@ import bpy
 from . import nodes
 from .catalog import MODELS
 
+# Cycles runs OSL on the CPU and on OptiX only; on these GPU backends a Script node renders black.
+GPU_WITHOUT_OSL = {"CUDA": "CUDA", "HIP": "HIP", "METAL": "Metal", "ONEAPI": "oneAPI"}
+
+
+def _compute_device_type():
+    """Cycles' GPU backend from the preferences ("NONE", "CUDA", "OPTIX", ...), None if unknown."""
+    addon = bpy.context.preferences.addons.get("cycles")
+    return getattr(getattr(addon, "preferences", None), "compute_device_type", None)
+
+
+def osl_render_problem(scene, compute_device_type: str | None = None) -> str | None:
+    """Why Microfacet Lab nodes would render black with `scene`'s render settings, and how to fix
+    it, in one sentence; None when they render. The one check behind every warning (the Add and
+    Apply operators, the presets panel). `compute_device_type` defaults to Cycles' preference."""
+    if scene.render.engine != "CYCLES":
+        return ("Microfacet Lab shaders are OSL and render only in Cycles: set Render Properties "
+                "> Render Engine to Cycles and turn on Open Shading Language")
+    cycles = scene.cycles
+    if not cycles.shading_system:
+        return ("Open Shading Language is off, so Microfacet Lab shaders render black: turn on "
+                "Render Properties > Open Shading Language")
+    if cycles.device == "GPU":
+        backend = compute_device_type if compute_device_type is not None else _compute_device_type()
+        if backend in GPU_WITHOUT_OSL:
+            return (f"Cycles cannot run OSL on {GPU_WITHOUT_OSL[backend]} GPUs, so Microfacet Lab "
+                    "shaders render black: switch Device to CPU or OptiX (Render Properties > "
+                    "Device; the GPU backend is in Preferences > System)")
+    return None
+
 
 class NODE_OT_microfacet_lab_add(bpy.types.Operator):
     """Add a Microfacet Lab BSDF node group to the active shader node tree"""
@@ -27,14 +56,14 @@ class NODE_OT_microfacet_lab_add(bpy.types.Operator):
 
     def execute(self, context):
         tree = context.space_data.edit_tree
-        if context.scene.render.engine != "CYCLES":
-            self.report({"WARNING"}, "Microfacet Lab shaders are OSL: they render in Cycles "
-                                     "with Open Shading Language enabled (CPU or OptiX)")
         try:
             node = nodes.add_group_node(tree, self.model)
         except Exception as error:  # compile failure: report, leave the tree as it was
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
+        problem = osl_render_problem(context.scene)
+        if problem:
+            self.report({"WARNING"}, problem)
         for other in tree.nodes:
             other.select = False
         node.select = True

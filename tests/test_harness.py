@@ -11,7 +11,7 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import nodes, shaders  # noqa: E402
+from addon import compat, nodes, shaders  # noqa: E402
 
 from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS, ENUM  # noqa: E402
@@ -57,7 +57,10 @@ def test_node_group_sockets_follow_the_catalog(model_id):
     inputs = [s for s in group.interface.items_tree if s.in_out == "INPUT"]
     assert [s.name for s in inputs] == [p.label for p in model.params]
     for socket, param in zip(inputs, model.params):
-        if param.kind == ENUM:
+        if param.kind == ENUM and compat.MENU_SOCKETS:  # a menu of the items' labels
+            assert socket.socket_type == "NodeSocketMenu"
+            assert socket.default_value == param.item_label(param.default)
+        elif param.kind == ENUM:
             assert socket.default_value == param.index(param.default)
             assert (socket.min_value, socket.max_value) == (0, len(param.items) - 1)
         elif param.kind == "float":

@@ -144,16 +144,24 @@ def lab_inputs(material):
     from addon import preset_ui
 
     node = preset_ui.lab_node(material)
-    return node, {s.name: (tuple(s.default_value) if hasattr(s.default_value, "__len__") else s.default_value)
+    return node, {s.name: (tuple(s.default_value) if hasattr(s.default_value, "__len__")
+                           and not isinstance(s.default_value, str) else s.default_value)  # menus: str
                   for s in node.inputs}
 
 
 def expected_inputs(preset):
+    from addon import compat  # bpy: menus (item labels) on 5.0+, integer codes before
+
     model = preset.model
     out = {}
     for p in model.params:
         v = preset.resolved()[p.id]
-        out[p.label] = (*v, 1.0) if p.kind == "color" else (p.index(v) if p.kind == "enum" else v)
+        if p.kind == "color":  # N, K on vector sockets (RGB), colours on colour sockets (RGBA)
+            out[p.label] = tuple(v) if p.socket == "VECTOR" else (*v, 1.0)
+        elif p.kind == "enum":
+            out[p.label] = p.item_label(v) if compat.MENU_SOCKETS else p.index(v)
+        else:
+            out[p.label] = v
     return out
 
 

@@ -93,7 +93,7 @@ def test_render_exr_reads_the_same_through_blender_and_openimageio(tmp_path):
     if not compat.has_openimageio():
         pytest.skip(f"this bpy ({bpy.app.version_string}) bundles no OpenImageIO")
     path = tmp_path / "x.exr"
-    harness.render_specs(FURNACE[:2], grid.GRADIENT, 2, seed=1, cell_px=12, path=str(path))
+    harness.render_specs(FURNACE[:2], grid.GRADIENT, 2, seed=1, cols=2, cell_px=12, path=str(path))
     by_oiio = compat.read_image(path, use_openimageio=True)
     by_blender = compat.read_image(path, use_openimageio=False)
     assert by_oiio.shape == by_blender.shape == (12, 24, 4)

@@ -1,0 +1,439 @@
+"""The node an artist sees: socket types, names, ranges, tooltips and the warnings, per version.
+
+- Enums are menus of named items where Blender has menu sockets in shader node groups (5.0+),
+  integer sockets listing their codes where it has none (4.2, 4.5): `compat.MENU_SOCKETS`,
+  checked here against the capability itself.
+- A menu reaches the shader exactly as the integer code did: the same material built both ways
+  renders pixel-identical at every item of every enum, and the OSL runtime optimizer reports
+  the same statistics for both (the menu is a constant it folds, like an unlinked int), while
+  the same code fed through a varying node chain changes them (the statistic sees the
+  difference). A saved file with menus renders the same without the add-on.
+- Apply, Add and the presets panel say why the nodes would render black (OSL off, a GPU
+  backend without OSL) and how to fix it.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bpy_helpers import run_bpy_script
+
+bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
+
+from addon import compat, nodes, ui  # noqa: E402
+from addon.catalog import COLOR, ENUM, ENUMS, FACTOR, MODELS, VECTOR  # noqa: E402
+from addon.lab import harness  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+
+LABELS = {
+    "cook_torrance": ["Diffuse Color", "Specular", "Roughness", "Fresnel", "IOR", "N (complex IOR)",
+                      "K (extinction)", "Sampler"],
+    "walter_reflection": ["Specular Tint", "Roughness", "Anisotropy", "Distribution", "Masking",
+                          "Fresnel", "IOR", "N (complex IOR)", "K (extinction)", "Sampler"],
+    "walter_glass": ["Tint", "Roughness", "IOR", "Distribution", "Masking", "Sampler"],
+    "lee_vgroove": ["Specular Tint", "Roughness", "Distribution", "Groove", "Fresnel", "IOR",
+                    "N (complex IOR)", "K (extinction)", "Max Bounces"],
+}
+ITEM_NAMES = {
+    "distribution": ["GGX", "Beckmann"],
+    "masking": ["Height-correlated", "Separable"],
+    "fresnel_type": ["Conductor", "Dielectric", "None"],
+    "sampler": ["D·cos (Walter 2007)", "Visible normals (Heitz 2014)", "V-cavity visible normals"],
+    "groove": ["Symmetric", "Asymmetric"],
+}
+FACTORS = {"roughness", "specular", "anisotropy"}
+VECTORS = {"n", "k"}
+# Formula marks a tooltip must not carry: =, |, ^, _ and the symbols of the formulas.
+FORMULA = re.compile(r"[=|^_]|\b(wi|wo|alpha|eta|G1|G2|chi|pdf)\b")
+
+
+def input_sockets(group):
+    return [s for s in group.interface.items_tree if getattr(s, "in_out", None) == "INPUT"]
+
+
+@pytest.fixture()
+def groups():
+    harness.new_scene()
+    return {model_id: nodes.ensure_group(model_id) for model_id in MODELS}
+
+
+def test_menu_capability_matches_compat():
+    """compat.MENU_SOCKETS is what this Blender can do: a shader node group takes a menu
+    socket and a Menu Switch exactly where it says so (5.0+)."""
+    tree = bpy.data.node_groups.new("capability", "ShaderNodeTree")
+    try:
+        try:
+            tree.interface.new_socket("m", in_out="INPUT", socket_type="NodeSocketMenu")
+            tree.nodes.new("GeometryNodeMenuSwitch")
+            capable = True
+        except (TypeError, RuntimeError):
+            capable = False
+    finally:
+        bpy.data.node_groups.remove(tree)
+    assert capable == compat.MENU_SOCKETS
+    assert compat.MENU_SOCKETS == (bpy.app.version >= (5, 0, 0))
+
+
+@pytest.mark.parametrize("model_id", list(MODELS))
+def test_labels_and_socket_types_per_kind(groups, model_id):
+    model, group = MODELS[model_id], groups[model_id]
+    inputs = input_sockets(group)
+    assert [s.name for s in inputs] == LABELS[model_id] == [p.label for p in model.params]
+    assert "Color" not in [s.name for s in inputs]  # says what it colours
+    for sock, param in zip(inputs, model.params):
+        if param.kind == ENUM:
+            assert sock.socket_type == ("NodeSocketMenu" if compat.MENU_SOCKETS else "NodeSocketInt")
+        elif param.id in VECTORS:
+            assert param.socket == VECTOR and sock.socket_type == "NodeSocketVector"
+            assert tuple(sock.default_value) == pytest.approx(param.default)
+            assert (sock.min_value, sock.max_value) == pytest.approx((param.min, param.max))
+        elif param.kind == COLOR:
+            assert sock.socket_type == "NodeSocketColor"
+            assert tuple(sock.default_value) == pytest.approx((*param.default, 1.0))
+        else:
+            assert sock.socket_type == "NodeSocketFloat"
+            assert sock.subtype == ("FACTOR" if param.id in FACTORS else "NONE"), param.id
+            assert (param.socket == FACTOR) == (param.id in FACTORS)
+            assert sock.default_value == pytest.approx(param.default)
+            assert (sock.min_value, sock.max_value) == pytest.approx((param.min, param.max))
+    assert {p.id for p in model.params if p.id in FACTORS} <= FACTORS
+    # IOR and Max Bounces show their documented range.
+    for sock in inputs:
+        if sock.name == "IOR":
+            assert (sock.min_value, sock.max_value) == pytest.approx((0.01, 100.0))
+        if sock.name == "Max Bounces":
+            assert (sock.min_value, sock.max_value) == pytest.approx((0.0, 1000.0))
+
+
+@pytest.mark.parametrize("model_id", list(MODELS))
+def test_enums_show_named_items_or_listed_codes(groups, model_id):
+    model, group = MODELS[model_id], groups[model_id]
+    by_name = {s.name: s for s in input_sockets(group)}
+    script = group.nodes[nodes.SCRIPT_NODE_NAME]
+    for param in (p for p in model.params if p.kind == ENUM):
+        names = ITEM_NAMES[param.id][:len(param.items)]
+        assert list(param.item_labels) == names
+        sock = by_name[param.label]
+        if compat.MENU_SOCKETS:
+            assert sock.default_value == names[param.index(param.default)]
+            switch = group.nodes[nodes.MENU_NODE_PREFIX + param.id]
+            assert switch.bl_idname == "GeometryNodeMenuSwitch" and switch.data_type == "INT"
+            assert [item.name for item in switch.enum_items] == names
+            codes = [s.default_value for s in switch.inputs if s.identifier.startswith("Item_")]
+            assert codes == list(range(len(names)))
+            assert switch.inputs["Menu"].links[0].from_socket.name == param.label
+            target = switch.outputs[0].links[0].to_socket
+            assert target.node == script and target.name == "in_" + param.id
+            for item in switch.enum_items:
+                assert item.description and not FORMULA.search(item.description), item.description
+        else:
+            assert sock.default_value == param.index(param.default)
+            assert (sock.min_value, sock.max_value) == (0, len(names) - 1)
+            codes = ", ".join(f"{i} {name}" for i, name in enumerate(names))
+            assert sock.description.endswith(f"({codes})"), sock.description
+
+
+@pytest.mark.parametrize("model_id", list(MODELS))
+def test_tooltips_are_plain_words_and_groups_are_shader_coloured(groups, model_id):
+    group = groups[model_id]
+    texts = [group.description] + [s.description for s in input_sockets(group)]
+    for text in texts:
+        assert len(text) > 20, text
+        assert not FORMULA.search(text), f"formula in a tooltip: {text!r}"
+    assert group.color_tag == "SHADER"
+    assert group.name == "Microfacet Lab: " + MODELS[model_id].label
+
+
+def test_add_menu_lists_every_model_with_plain_descriptions():
+    ui.register()
+    try:
+        menu = getattr(bpy.types, ui.ADD_MENU)  # Add > Shader
+        assert ui.draw_add_menu in menu._dyn_ui_initialize()
+        items = bpy.ops.node.microfacet_lab_add.get_rna_type().properties["model"].enum_items
+        assert [i.identifier for i in items] == list(MODELS)
+        for item in items:
+            assert item.description and not FORMULA.search(item.description), item.description
+    finally:
+        ui.unregister()
+
+
+def test_set_inputs_takes_catalog_ids_and_menus_refuse_unknown_items():
+    harness.new_scene()
+    material = harness.model_material("walter_reflection", {
+        "distribution": "beckmann", "masking": "separable", "fresnel_type": "none",
+        "sampler": "dcos", "n": (0.2, 3.6, 7.5)}, "set")
+    node = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    if compat.MENU_SOCKETS:
+        assert [node.inputs[k].default_value for k in ("Distribution", "Masking", "Fresnel", "Sampler")] \
+            == ["Beckmann", "Separable", "None", "D·cos (Walter 2007)"]
+        with pytest.raises(TypeError):
+            node.inputs["Sampler"].default_value = "Sampler 7"
+    else:
+        assert [node.inputs[k].default_value for k in ("Distribution", "Masking", "Fresnel", "Sampler")] \
+            == [1, 1, 2, 0]
+    assert tuple(node.inputs["N (complex IOR)"].default_value) == pytest.approx((0.2, 3.6, 7.5))
+    with pytest.raises(ValueError):
+        MODELS["walter_reflection"].param("sampler").item_label("vcavity")  # not offered here
+
+
+# --- the warnings -------------------------------------------------------------------------------
+
+WARNINGS = '''
+import os, sys, tempfile
+root = sys.argv[1]
+sys.path.insert(0, root)
+import bpy
+from addon import preset_ui, ui
+from addon.lab import harness
+
+def captured(call):
+    """The call's result and what Blender printed meanwhile (operator reports go to the console
+    in background mode)."""
+    sys.stdout.flush(); sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 1); os.dup2(tmp.fileno(), 2)
+        try:
+            result = call()
+        finally:
+            sys.stdout.flush(); sys.stderr.flush()
+            os.dup2(saved[0], 1); os.dup2(saved[1], 2)
+            [os.close(fd) for fd in saved]
+        tmp.seek(0)
+        return sorted(result), tmp.read().decode(errors="replace")
+
+scene = harness.new_scene()
+ui.register(); preset_ui.register()
+mesh = bpy.data.meshes.new("ball")
+obj = bpy.data.objects.new("ball", mesh)
+scene.collection.objects.link(obj)
+bpy.context.view_layer.objects.active = obj
+
+class Recorder:
+    def __init__(self, labels): self.labels = labels
+    def label(self, text="", **kw): self.labels.append(text)
+    def __getattr__(self, name): return lambda *a, **k: self
+
+def panel_text():
+    labels = []
+    class Panel: layout = Recorder(labels)
+    preset_ui.MATERIAL_PT_microfacet_lab_presets.draw(Panel, bpy.context)
+    return " ".join(labels)
+
+apply = lambda: bpy.ops.material.microfacet_lab_apply_preset(preset="gold")
+out = {}
+scene.cycles.shading_system = False
+out["apply_osl_off"] = captured(apply)
+out["panel_osl_off"] = panel_text()
+area = bpy.context.window.screen.areas[0]
+area.ui_type = "ShaderNodeTree"
+space = area.spaces.active
+space.node_tree = obj.active_material.node_tree
+region = next(r for r in area.regions if r.type == "WINDOW")
+with bpy.context.temp_override(window=bpy.context.window, area=area, region=region, space_data=space):
+    out["add_osl_off"] = captured(lambda: bpy.ops.node.microfacet_lab_add(model="walter_glass"))
+scene.cycles.shading_system = True
+out["apply_cpu"] = captured(apply)
+out["panel_cpu"] = panel_text()
+scene.cycles.device = "GPU"
+out["apply_gpu_none"] = captured(apply)  # no GPU backend chosen: Cycles renders on the CPU
+ui._compute_device_type = lambda: "CUDA"  # this headless build lists no GPU backend to pick
+out["apply_cuda"] = captured(apply)
+out["panel_cuda"] = panel_text()
+ui._compute_device_type = lambda: "OPTIX"
+out["apply_optix"] = captured(apply)
+report(out)
+'''
+
+OSL_FIX = "Render Properties > Open Shading Language"
+DEVICE_FIX = "switch Device to CPU or OptiX"
+
+
+def test_functions_say_why_it_renders_black_and_how_to_fix():
+    scene = harness.new_scene()
+    assert ui.osl_render_problem(scene) is None
+    scene.cycles.shading_system = False
+    assert OSL_FIX in ui.osl_render_problem(scene)
+    scene.cycles.shading_system = True
+    scene.cycles.device = "GPU"
+    for backend in ("CUDA", "HIP", "METAL", "ONEAPI"):
+        assert DEVICE_FIX in ui.osl_render_problem(scene, backend), backend
+    for backend in ("OPTIX", "NONE"):
+        assert ui.osl_render_problem(scene, backend) is None, backend
+    scene.render.engine = "BLENDER_WORKBENCH"
+    assert "Cycles" in ui.osl_render_problem(scene)
+
+
+def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
+    out = run_bpy_script(WARNINGS, tmp_path, str(ROOT))
+    log = out.pop("_log")
+    for key in ("apply_osl_off", "add_osl_off", "apply_cuda"):
+        result, printed = out[key]
+        assert result == ["FINISHED"], (key, printed, log)
+        fix = DEVICE_FIX if key == "apply_cuda" else OSL_FIX
+        warnings = [line for line in printed.splitlines() if line.startswith("Warning")]
+        assert len(warnings) == 1 and fix in warnings[0], (key, printed)
+    assert "CUDA" in out["apply_cuda"][1]
+    for key in ("apply_cpu", "apply_gpu_none", "apply_optix"):
+        result, printed = out[key]
+        assert result == ["FINISHED"] and "Warning" not in printed, (key, printed)
+    assert OSL_FIX in out["panel_osl_off"] and DEVICE_FIX in out["panel_cuda"]
+    assert "render black" in out["panel_osl_off"]
+    assert "Open Shading" not in out["panel_cpu"] and DEVICE_FIX not in out["panel_cpu"]
+
+
+# --- menus reach the shader as the integer codes did ------------------------------------------
+
+RENDER = '''
+import os, re, sys, tempfile, time
+root, mode, exr, blend = sys.argv[1:5]
+sys.path.insert(0, root)
+import bpy
+from addon import nodes
+from addon.catalog import ENUM, MODELS
+from addon.lab import grid, harness
+
+CASES = [(m.id, p.id, item) for m in MODELS.values() for p in m.params if p.kind == ENUM
+         for item in p.items]
+
+def maker(i, model_id, pid, item):
+    def make():
+        model = MODELS[model_id]
+        if mode != "menu" and nodes.group_name(model) not in bpy.data.node_groups:
+            nodes.build_group(model, menus=False)  # the integer sockets of Blender 4.x
+        material = harness.model_material(model_id, {pid: item}, f"{i:02d} {model_id} {pid} {item}")
+        if mode == "varying":  # the same code through a chain Cycles cannot fold
+            tree = material.node_tree
+            node = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
+            info = tree.nodes.new("ShaderNodeObjectInfo")
+            scale = tree.nodes.new("ShaderNodeMath")
+            scale.operation = "MULTIPLY_ADD"
+            scale.inputs[1].default_value = 1e-3
+            scale.inputs[2].default_value = model.param(pid).index(item) + 0.5
+            floor = tree.nodes.new("ShaderNodeMath")
+            floor.operation = "FLOOR"
+            tree.links.new(info.outputs["Random"], scale.inputs[0])
+            tree.links.new(scale.outputs[0], floor.inputs[0])
+            tree.links.new(floor.outputs[0], node.inputs[model.param(pid).label])
+        return material
+    return make
+
+sys.stdout.flush(); sys.stderr.flush()
+saved = [os.dup(1), os.dup(2)]
+with tempfile.TemporaryFile() as tmp:
+    os.dup2(tmp.fileno(), 1); os.dup2(tmp.fileno(), 2)
+    try:
+        layout, image, seconds = harness.render_specs(
+            None, grid.GRADIENT, 4, seed=5, cols=6, cell_px=20, path=exr,
+            materials=[maker(i, *case) for i, case in enumerate(CASES)])
+    finally:
+        sys.stdout.flush(); sys.stderr.flush()
+        os.dup2(saved[0], 1); os.dup2(saved[1], 2)
+        [os.close(fd) for fd in saved]
+    tmp.seek(0)
+    printed = tmp.read().decode(errors="replace")
+# The OSL runtime optimizer's statistics (OSL_OPTIONS=statistics:level=1), without timings and
+# without what is alive at the moment of printing ("current").
+stats = [re.sub(r",[^,]*current", "", line.strip()) for line in printed.splitlines()
+         if re.match(r"\\s*(Instances:|Compiled|Optimized|Constant connections|Global connections"
+                     r"|Merged|After optimization|Instance connections)", line)]
+# With OSL_OPTIONS debug=1 the optimizer lists each layer before and after optimizing: a folded
+# enum is read by no `useparam` op, a connected one is listed "param int in_<id> (...) connected".
+enum_ids = sorted({pid for _, pid, _ in CASES})
+folding = {pid: {"useparam": len(re.findall(rf"useparam[^\\n]*\\bin_{pid}\\b", printed)),
+                 "connected": len(re.findall(rf"param int in_{pid} \\(.*\\) connected", printed))}
+           for pid in enum_ids}
+menus = sorted({s.type for m in bpy.data.materials if m.node_tree for n in m.node_tree.nodes
+                if n.bl_idname == "ShaderNodeGroup" for s in n.inputs})
+if blend != "-":
+    bpy.ops.wm.save_as_mainfile(filepath=blend, compress=False)
+report({"cases": CASES, "stats": stats, "folding": folding, "seconds": seconds, "socket_types": menus,
+        "samples": 4, "pixels": layout.width * layout.height})
+'''
+
+FARM = '''
+import sys
+blend, exr = sys.argv[1], sys.argv[2]
+import bpy
+if hasattr(bpy.utils, "expose_bundled_modules"):
+    bpy.utils.expose_bundled_modules()
+bpy.ops.wm.open_mainfile(filepath=blend)
+scene = bpy.context.scene
+menus = sorted({(s.name, s.default_value) for m in bpy.data.materials if m.node_tree
+                for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"
+                for s in n.inputs if s.type == "MENU"})
+scene.render.filepath = exr
+bpy.ops.render.render(write_still=True)
+foreign = sorted(m for m in sys.modules if m == "addon" or m.startswith("addon.")
+                 or "microfacet" in m.lower())
+report({"menus": [list(m) for m in menus], "foreign_modules": foreign})
+'''
+
+
+@pytest.mark.render
+@pytest.mark.skipif(not compat.MENU_SOCKETS, reason="no menu sockets in shader node groups before 5.0")
+def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
+    env = {"OSL_OPTIONS": "statistics:level=1,debug=1"}
+    runs = {}
+    for mode in ("menu", "int", "varying"):
+        work = tmp_path / mode
+        work.mkdir()
+        blend = str(work / "menus.blend") if mode == "menu" else "-"
+        out = run_bpy_script(RENDER, work, str(ROOT), mode, str(work / "grid.exr"), blend,
+                             env=env, timeout=300)
+        runs[mode] = (out, compat.read_image(work / "grid.exr"))
+    menu, menu_image = runs["menu"]
+    integer, int_image = runs["int"]
+    varying, _ = runs["varying"]
+    assert "MENU" in menu["socket_types"] and "MENU" not in integer["socket_types"]
+    assert "INT" in integer["socket_types"]
+
+    # Pixel-identical at every item of every enum.
+    assert menu_image.shape == int_image.shape
+    assert np.array_equal(menu_image, int_image), np.abs(menu_image - int_image).max()
+    # ... and every item changes the picture (the menu value does reach the shader).
+    layout_cols, cell = 6, 20
+    cells = {}
+    for i, (model_id, pid, item) in enumerate(menu["cases"]):
+        r, c = divmod(i, layout_cols)
+        cells.setdefault((model_id, pid), []).append(menu_image[r * cell:(r + 1) * cell,
+                                                                c * cell:(c + 1) * cell, :3])
+    for key, images in cells.items():
+        for a in range(len(images)):
+            for b in range(a):
+                assert not np.array_equal(images[a], images[b]), key
+
+    # Constant folding: the OSL optimizer sees the same shader groups (instances, connections,
+    # ops left after constant folding) for menus as for unlinked integers ...
+    print(f"\n[menus] OSL statistics, menus: {menu['stats']}")
+    print(f"[menus] varying: {varying['stats']}")
+    print(f"[menus] render s (menu, int, varying): {menu['seconds']:.3f} {integer['seconds']:.3f} "
+          f"{varying['seconds']:.3f}")
+    assert any(line.startswith("Optimized") for line in menu["stats"]), menu["_log"]
+    assert menu["stats"] == integer["stats"]
+    # ... while the same codes through a varying chain are seen as connections.
+    assert varying["stats"] != integer["stats"]
+    # Per shader layer: no enum survives optimization as a parameter read, menu or integer;
+    # through the varying chain every one is connected and read at run time.
+    print(f"[menus] enum parameters left after optimization: menu {menu['folding']}, "
+          f"varying {varying['folding']}")
+    zero = {"useparam": 0, "connected": 0}
+    assert set(menu["folding"]) == set(ENUMS)
+    assert menu["folding"] == integer["folding"] == {pid: zero for pid in ENUMS}
+    assert all(f["connected"] > 0 and f["useparam"] > 0 for f in varying["folding"].values()), \
+        varying["folding"]
+
+    # The saved file with menus renders the same without the add-on.
+    farm = tmp_path / "farm"
+    farm.mkdir()
+    out = run_bpy_script(FARM, farm, str(tmp_path / "menu" / "menus.blend"), str(farm / "farm.exr"))
+    assert out["foreign_modules"] == [], out["_log"]
+    assert ["Sampler", "D·cos (Walter 2007)"] in out["menus"] and ["Fresnel", "None"] in out["menus"]
+    farm_image = compat.read_image(farm / "farm.exr")
+    assert farm_image.shape == menu_image.shape
+    assert np.abs(farm_image - menu_image).max() < 1e-4
+    assert farm_image[..., :3].mean() > 0.05
