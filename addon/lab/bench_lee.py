@@ -14,6 +14,9 @@ uses `furnace_means`, and the report's smoke test).
 - `tracer_vs_closed_form`: time for the closed-form quadrature (lee.albedo), the analytic
   sampler (lee.sample) and the brute-force tracer (vgroove.trace) to reach the same albedo error.
 - `moments_accuracy`: the default moment rules (lee.MOMENT_NODES) against much finer ones.
+- `max_bounces_agreement`: Max Bounces read by the twins: the albedo from LeeBRDF.eval
+  (quadrature at normal incidence), from the sampler (Monte Carlo, standard error) and from
+  lee.albedo (closed form), gold, per Max Bounces (docs/lee-asymmetric-grooves.md sec. 4).
 `markdown(results)` formats any of these dicts as a Markdown table. Run them all with
 `python -m addon.lab.bench_lee` (from the repository root, the pinned environment).
 """
@@ -281,6 +284,44 @@ def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01), alphas=(0.09, 1.0),
     return out
 
 
+def max_bounces_agreement(alpha: float = 1.0, max_bounces=(1, 2, 5, 0),
+                          grooves=("symmetric", "asymmetric"), n: int = 200000, seed: int = 7,
+                          progress=None) -> dict:
+    """Green-channel albedo at normal incidence, GGX `alpha`, catalog gold, per groove and Max
+    Bounces: `eval` = 2 pi integral of LeeBRDF.eval cos sin over theta_o (200 panels of 64
+    Gauss-Legendre nodes; the lobe is isotropic at normal incidence), `sampler` = mean weight of
+    `n` LeeBRDF.sample draws with its standard error, `closed_form` = lee.albedo(kmax = Max
+    Bounces). All three read Max Bounces as the number of bounces that get their Fresnel
+    factor (later ones F = 1)."""
+    from .reference import lee, make_bsdf
+
+    x, w = np.polynomial.legendre.leggauss(64)
+    edges = np.linspace(0.0, 0.5 * math.pi, 201)
+    half = 0.5 * np.diff(edges)[:, None]
+    theta = (0.5 * (edges[:-1] + edges[1:])[:, None] + half * x).ravel()
+    weight = (half * w).ravel() * 2.0 * math.pi * np.cos(theta) * np.sin(theta)
+    wo = np.stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)], axis=-1)
+    wi = np.array([0.0, 0.0, 1.0])
+    out = {}
+    for groove in grooves:
+        for mb in max_bounces:
+            if progress:
+                progress(f"Lee Max Bounces {mb}: {groove}")
+            b = make_bsdf("lee_vgroove", {"roughness": math.sqrt(alpha), "groove": groove,
+                                          "fresnel_type": "conductor", "max_bounces": float(mb)})
+            e = float(weight @ b.eval(wi, wo)[:, 1])
+            rng = np.random.default_rng(seed)
+            _, wt, _ = b.sample(wi, rng.random((n, 3 if groove == "symmetric" else 6)))
+            q = lee.albedo(wi, b.mf, b.fresnel, groove, n=512 if groove == "symmetric" else 128,
+                           kmax=b.kmax, n_partner=64)
+            out[f"{groove} max_bounces={mb}"] = {
+                "kmax": b.kmax, "eval_terms": b.kterms, "eval_G": e,
+                "sampler_G": float(wt[:, 1].mean()),
+                "sampler_se_G": float(wt[:, 1].std() / math.sqrt(n)),
+                "closed_form_G": float(q[1])}
+    return out
+
+
 def markdown(results: dict) -> str:
     """A Markdown table of {row: {column: value}}; rows whose key starts with '_' (settings)
     and columns holding lists or dicts are left out."""
@@ -314,7 +355,7 @@ if __name__ == "__main__":
         print(f"[bench_lee] {f'({i}/{n}) ' if i is not None else ''}{message}", file=sys.stderr,
               flush=True)
 
-    what = set(sys.argv[1:]) or {"furnace", "cost", "tracer", "accuracy"}
+    what = set(sys.argv[1:]) or {"furnace", "cost", "tracer", "accuracy", "max_bounces"}
     if "furnace" in what:
         labels, layout, image, means = render_furnace()
         print(furnace_markdown(FURNACE_ALPHAS, means,
@@ -325,3 +366,5 @@ if __name__ == "__main__":
         print(markdown(tracer_vs_closed_form(progress=_progress)))
     if "accuracy" in what:
         print(markdown(moments_accuracy(progress=_progress)))
+    if "max_bounces" in what:
+        print(markdown(max_bounces_agreement(progress=_progress)))

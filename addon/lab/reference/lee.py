@@ -64,6 +64,12 @@ sin(theta_l + theta_r) / Z (landed on either wall) times the beam fraction and t
 product, with |ds_l/dwo| = sin(theta_l) / (c_k |(wi + wo).t|), c_k = k (even) or k + 1 (odd):
 theta_l is fixed by theta_r through the exit angle, and a Gauss-Legendre rule over the window
 of theta_r, invariant under path reversal, keeps f(wi, wo) = f(wo, wi) to rounding.
+
+Max Bounces (the catalog's max_bounces, LeeBRDF.kmax; 0 = the derived bound max_bounces()):
+the first kmax bounces of a path get their Fresnel factor, later bounces F = 1, and every path
+is followed to its exact exit. One meaning in sample, eval / eval_asymmetric (fresnel_bounces;
+their kmax is the number of terms summed, which LeeBRDF sets to the derived bound), albedo,
+moments and the OSL shader (doc sec. 4): energy-conserving (F = 1: exactly 1 at any limit).
 """
 from __future__ import annotations
 
@@ -157,16 +163,38 @@ def exit_angle(theta_i, theta_l, theta_r, k):
                     2.0 * theta_l - theta_i - (k - 1.0) * tv)
 
 
-def fresnel_product(fresnel, rho, phi0, theta_v, k, kmax: int):
-    """prod_{j=1..k} F(rho |sin(phi0 + (j-1) theta_v)|), RGB, for k <= kmax (loop of kmax)."""
-    out = np.ones(np.shape(k) + (3,))
-    for j in range(1, kmax + 1):
-        on = k >= j
-        if not np.any(on):
-            break
-        c = rho[on] * np.abs(np.sin(phi0[on] + (j - 1) * theta_v[on]))
-        out[on] *= fresnel(np.minimum(c, 1.0))
-    return out
+def fresnel_product(fresnel, rho, phi0, theta_v, k, kmax: int, block: int = 16):
+    """prod_{j=1..min(k, kmax)} F(rho |sin(phi0 + (j-1) theta_v)|), RGB: the first min(k, kmax)
+    bounces get their Fresnel factor, later ones F = 1 (Max Bounces, doc sec. 4). Vectorised
+    over `block` bounces at a time, the paths sorted by their count so that the paths still
+    running are a prefix: the cost is the number of factors, not kmax times the paths."""
+    rho, phi0, theta_v = (np.asarray(a, dtype=float) for a in (rho, phi0, theta_v))
+    k = np.asarray(k, dtype=float)
+    m = np.minimum(np.where(k >= 1.0, k, 0.0), float(kmax)).astype(np.int64)  # NaN: none
+    shape = np.broadcast_shapes(rho.shape, phi0.shape, theta_v.shape, m.shape)
+    rho, phi0, theta_v, m = (np.broadcast_to(a, shape).ravel() for a in (rho, phi0, theta_v, m))
+    if isinstance(fresnel, FresnelTable) and fresnel.constant:  # F = 1 (or any constant)
+        return (fresnel.F[0] ** m[:, None].astype(float)).reshape(shape + (3,))
+    out = np.ones((m.size, 3))
+    if m.size == 0 or m.max() <= 0:
+        return out.reshape(shape + (3,))
+    order = np.argsort(-m, kind="stable")
+    ms = m[order]
+    neg = -ms  # ascending: the count of paths with more than j0 factors is a searchsorted
+    for j0 in range(0, int(ms[0]), block):
+        live = order[:int(np.searchsorted(neg, -j0, side="left"))]
+        jj = np.arange(j0, j0 + block, dtype=float)
+        c = np.minimum(rho[live, None] * np.abs(np.sin(phi0[live, None]
+                                                        + jj * theta_v[live, None])), 1.0)
+        if isinstance(fresnel, FresnelTable):
+            out[live] *= fresnel.product(c, ms[:live.size] - j0)
+            continue
+        F = np.asarray(fresnel(c), dtype=float)
+        past = jj[None, :] >= ms[:live.size, None]  # factors beyond the path's own count
+        if past.any():
+            F = np.where(past[..., None], 1.0, F)
+        out[live] *= np.prod(F, axis=1)
+    return out.reshape(shape + (3,))
 
 
 def _vec(t, n3, u, rho, theta, wu):
@@ -208,9 +236,9 @@ def sample(wi, u, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax:
     the partner wall's angle, asymmetric]; u2: the offset l = f_B + u2 (f_A - f_B) (uniform
     entry point on the opening; l < 0 means the right wall first: mirror). Then k, theta_o in
     closed form; weight = prod of the k Fresnel terms (exactly 1 with F = 1). The exit
-    direction is exact for every k; the Fresnel loop stops at kmax (default
-    max_bounces(alpha)): the rarer paths with k > kmax (energy < 1e-4) carry the product of
-    their first kmax Fresnel terms, so the furnace stays exactly 1."""
+    direction is exact for every k; the Fresnel loop stops at kmax (Max Bounces; default
+    max_bounces(alpha)): paths with k > kmax (with the default, energy < 1e-4) carry the
+    product of their first kmax Fresnel terms, so the furnace stays exactly 1."""
     fresnel = fresnel or fresnel_fn("none")
     wi = np.asarray(wi, dtype=float)
     u = np.asarray(u, dtype=float)
@@ -286,58 +314,142 @@ def G_k_symmetric(theta_i, theta_s, k):
     return np.where(fA > 0.0, length / np.where(fA > 0.0, fA, 1.0), 0.0)
 
 
-def _pieces(ti, tl, tr, ell_lo, ell_hi, Ll, Lr, kmax):
-    """Split the left-first offsets (ell_lo, ell_hi] into runs of equal bounce count, from the
-    DEFINITION k(l) = first m with f(V_m) < l (not from the counting formula used by the
-    sampler): k(l) >= j + 1 <=> l <= min_{m <= j} f(V_m). Returns [(k, length)] for
-    k = 1..kmax+1 (the last entry collects every k > kmax)."""
+GAUSS_PANEL = 2  # Gauss-Legendre nodes per panel of albedo()'s wall rules
+
+
+def _wall_nodes(distribution: str, alpha: float, n: int, partner: bool = False, breaks=()):
+    """Nodes (theta, weight) of a wall angle, weights summing to 1, for albedo(): composite
+    Gauss-Legendre (GAUSS_PANEL nodes per panel, about n in all) in a variable where the
+    density is smooth at both ends (the inverse CDF u is not: tan theta ~ sqrt(u) at 0, and
+    GGX has tan theta ~ 1/sqrt(1 - u) at 1, a tail the midpoint rule in u resolves only as
+    about n^-1.3), with panel ends at `breaks` (wall angles where the integrand has a kink
+    for every other groove coordinate, see albedo):
+      drawn wall, D(s)(s.n): GGX tan theta = alpha tan x, x in [0, pi/2], weight sin(2x)
+        (u = sin^2 x); Beckmann tan theta = alpha y, y in [0, BECKMANN_Y_MAX], weight
+        2 y exp(-y^2) (u = 1 - exp(-y^2));
+      partner, D sin^2 (sample_partner): GGX tan theta = alpha tan b, b = (pi/2)(1 - (1 - v)^2)
+        (v graded toward the steep end, where the density peaks and the bounce-count kinks
+        accumulate), weight sin^2(b) db/dv; Beckmann y, weight y^2 exp(-y^2).
+    The panels are spread over the intervals between breaks in proportion to their length in
+    the variable (at least one each)."""
+    ggx = distribution == "ggx"
+    top = 1.0 if (ggx and partner) else 0.5 * PI if ggx else BECKMANN_Y_MAX
+
+    def var(theta):  # the integration variable of a wall angle
+        t = math.tan(min(max(theta, 0.0), 0.5 * PI)) / alpha
+        if not ggx:
+            return min(t, BECKMANN_Y_MAX)
+        b = math.atan(t)
+        return 1.0 - math.sqrt(max(1.0 - 2.0 * b / PI, 0.0)) if partner else b
+
+    ends = sorted({0.0, top, *(var(b) for b in breaks if 0.0 < b < 0.5 * PI)})
+    ends = [e for i, e in enumerate(ends) if i == 0 or e - ends[i - 1] > 1e-12 * top]
+    panels = max(1, -(-n // GAUSS_PANEL))
+    gx, gw = np.polynomial.legendre.leggauss(GAUSS_PANEL)
+    vs, ws = [], []
+    for a, b in zip(ends[:-1], ends[1:]):
+        m = max(1, round(panels * (b - a) / top))
+        e = np.linspace(a, b, m + 1)
+        h = 0.5 * np.diff(e)[:, None]
+        vs.append((0.5 * (e[:-1] + e[1:])[:, None] + h * gx).ravel())
+        ws.append((h * gw).ravel())
+    v, w = np.concatenate(vs), np.concatenate(ws)
+    if ggx:
+        if partner:
+            x = 0.5 * PI * (1.0 - (1.0 - v) ** 2)
+            w = w * np.sin(x) ** 2 * (1.0 - v)
+        else:
+            x = v
+            w = w * np.sin(2.0 * x)
+        theta = np.arctan(alpha * np.tan(x))
+    else:
+        w = w * (v * v if partner else 2.0 * v) * np.exp(-v * v)
+        theta = np.arctan(alpha * v)
+    return theta, w / w.sum()
+
+
+def _albedo_runs(ti, tl, tr, lo, hi, Ll, Lr, rho, fresnel, kmax):
+    """Sum over k of (length of the left-first offsets in (lo, hi] making k bounces) times
+    prod_{j <= min(k, kmax)} F_j, per groove (RGB): the runs of equal count from the
+    DEFINITION k(l) = first m with f(V_m) < l (k(l) >= j + 1 <=> l <= min_{m <= j} f(V_m); not
+    from the sampler's counting formula), the Fresnel product kept cumulatively, the grooves
+    whose runs have all left dropped as the walk goes. After kmax bounces the factors are 1
+    (as in the sampler), so what is left of the beam then adds with the product so far."""
     tv = PI - tl - tr
     phi0 = ti + 0.5 * PI - tl
-    out = []
+    out = np.zeros(np.shape(ti) + (3,))
+    idx = np.arange(np.size(ti))
+    prev = np.maximum(hi - lo, 0.0)  # length with k >= 1
     run_min = np.full(np.shape(ti), np.inf)
-    prev = np.maximum(ell_hi - ell_lo, 0.0)  # length with k >= 1
-    for j in range(1, kmax + 2):
-        R = Ll if j % 2 == 0 else Lr
-        run_min = np.minimum(run_min, R * np.sin(phi0 + j * tv))
-        cur = np.minimum(np.clip(np.minimum(run_min, ell_hi) - ell_lo, 0.0, None), prev)
-        out.append((j, prev - cur))  # length with k == j
-        prev = cur
-        if not np.any(prev > 0.0):
+    F = np.ones(np.shape(ti) + (3,))
+    j = 0
+    while idx.size:
+        j += 1
+        if j > kmax:
+            out[idx] += prev[:, None] * F
             break
-    if out[-1][0] == kmax + 1:
-        out[-1] = (kmax + 1, out[-1][1] + prev)
+        F = F * fresnel(np.minimum(rho * np.abs(np.sin(phi0 + (j - 1) * tv)), 1.0))
+        run_min = np.minimum(run_min, (Ll if j % 2 == 0 else Lr) * np.sin(phi0 + j * tv))
+        cur = np.minimum(np.clip(np.minimum(run_min, hi) - lo, 0.0, None), prev)
+        out[idx] += (prev - cur)[:, None] * F  # length with k == j
+        keep = cur > 0.0
+        idx, prev = idx[keep], cur[keep]
+        ti, tl, tr, lo, hi, Ll, Lr, rho, tv, phi0, run_min, F = (
+            a[keep] for a in (ti, tl, tr, lo, hi, Ll, Lr, rho, tv, phi0, run_min, F))
     return out
 
 
 def albedo(wi, mf: Microfacet, fresnel=None, groove: str = "symmetric", n: int = 512,
            kmax: int | None = None, n_partner: int = 96):
     """Closed-form directional albedo (RGB) by deterministic quadrature over the grooves:
-    E_s[ sum over first walls and k of (beam fraction with k bounces) prod F ], with s on a
-    midpoint grid of the inverse CDF of D(s)(s.n) (u1: n nodes, u2: n/2 nodes on [0, 1/2],
-    doubled by the symmetry y -> -y: wi must lie in the xz plane, isotropic D), and for
-    asymmetric grooves the partner angle on a Gauss-Legendre rule (n_partner nodes) in
-    theta_r. The beam fractions are the closed-form lengths of offset intervals; nothing is
-    sampled. Paths beyond kmax carry their first kmax Fresnel terms (as the sampler)."""
+    E_s[ sum over first walls and k of (beam fraction with k bounces) prod F ], s ~ D(s)(s.n)
+    on a tensor grid: the wall angle on about n nodes of _wall_nodes (composite 2-point
+    Gauss-Legendre in a variable smooth at both ends: GGX tan theta = alpha tan x, Beckmann
+    tan theta = alpha y), the azimuth on n/2 midpoint nodes over [0, pi), doubled by the
+    symmetry y -> -y (wi must lie in the xz plane; isotropic D, alpha_x is used; one azimuth
+    at normal incidence); asymmetric grooves: the partner angle on about n_partner nodes of
+    its own smooth variable. The wall rules have panel ends at the wall angles where the
+    integrand has a kink whatever the other coordinates: pi/4 and (pi/2 -+ theta)/2 (the
+    single-bounce exit turns from up to down, theta the incidence: the groove-frame incidence
+    ranges over [-theta, theta]) and pi/2 - theta (the wall turns away from wi). The beam
+    fractions are the closed-form lengths of offset intervals (_albedo_runs); nothing is
+    sampled. kmax is Max Bounces (default: the derived bound): the first kmax bounces of a
+    path get their Fresnel factor, later ones 1, as in the sampler; every path is counted.
+    Fresnel is tabulated (FresnelTable, < 1e-7 per factor); weights are normalised, so with
+    F = 1 the result is 1 to rounding.
+    Convergence (tests/test_reference_lee.py, test_albedo_quadrature_converges): symmetric, n vs
+    2n within 1e-5 from n = 512 (GGX and Beckmann; the former midpoint rule in the inverse
+    CDF read up to 1.1e-4 high at n = 512); asymmetric, (n, n_partner) = (128, 64) vs
+    (256, 128) within 1e-5 (docs/lee-asymmetric-grooves.md sec. 6)."""
     fresnel = fresnel or fresnel_fn("none")
+    if not isinstance(fresnel, FresnelTable):
+        fresnel = FresnelTable(fresnel)  # interpolation error < 1e-7 per factor
     wi = np.asarray(wi, dtype=float)
     if kmax is None:
         kmax = max_bounces(max(mf.alpha_x, mf.alpha_y), mf.distribution, groove)
-    u1 = (np.arange(n) + 0.5) / n
-    u2 = (np.arange(n // 2) + 0.5) / n
-    U1, U2 = np.meshgrid(u1, u2, indexing="ij")
-    s = mf.sample_dcos(U1.ravel(), U2.ravel())
-    t, ax = groove_frame(s)
-    theta_l = np.arctan2(np.hypot(s[:, 0], s[:, 1]), s[:, 2])
-    theta_i, rho, _ = _local(wi, t, ax)
+    alpha = mf.alpha_x
+    th = math.acos(min(max(float(wi[2]), -1.0), 1.0))
+    breaks = (0.25 * PI, 0.5 * (0.5 * PI - th), 0.5 * (0.5 * PI + th), 0.5 * PI - th)
+    t1, w1 = _wall_nodes(mf.distribution, alpha, n, breaks=breaks)
+    # At normal incidence every groove azimuth sees the same cross-section (isotropic D).
+    n_phi = 1 if wi[0] == 0.0 and wi[1] == 0.0 else max(n // 2, 1)
+    phi = (np.arange(n_phi) + 0.5) / n_phi * PI
+    T1, P = np.meshgrid(t1, phi, indexing="ij")
+    W = np.repeat(w1, n_phi) / n_phi
+    theta_l = T1.ravel()
+    P = P.ravel()
+    # wi in the groove frame t = (-cos phi, -sin phi, 0) (the wall s = normalize(-tan cos phi,
+    # -tan sin phi, 1) leans toward t): theta_i = atan2(wi.t, wi.z), rho = |(wi.t, wi.z)|.
+    px = -(wi[0] * np.cos(P) + wi[1] * np.sin(P))
+    theta_i = np.arctan2(px, wi[2])
+    rho = np.hypot(px, wi[2])
     if groove == "symmetric":
-        parts = [(theta_l, 1.0)]
+        partners = [(theta_l, 1.0)]
     else:
-        table = SizeBiasedTable(mf)
-        th = table.sample((np.arange(n_partner) + 0.5) / n_partner)
-        dens = np.full(n_partner, 1.0 / n_partner)
-        parts = [(th[i], dens[i]) for i in range(n_partner)]
+        tp, wp = _wall_nodes(mf.distribution, alpha, n_partner, partner=True, breaks=breaks)
+        partners = list(zip(tp, wp))
     total = np.zeros(3)
-    for theta_r_, wgt in parts:
+    for theta_r_, wgt in partners:
         theta_r = np.broadcast_to(theta_r_, theta_l.shape)
         if groove == "symmetric":
             Ll = Lr = np.ones_like(theta_l)
@@ -354,27 +466,27 @@ def albedo(wi, mf: Microfacet, fresnel=None, groove: str = "symmetric", n: int =
                 ti, tl, tr, Ll_, Lr_, hi_, lo_ = -theta_i, theta_r, theta_l, Lr, Ll, -fB, -fA
             lo_ = np.maximum(lo_, 0.0)
             hi_ = np.maximum(hi_, lo_)
-            tv = PI - tl - tr
-            phi0 = ti + 0.5 * PI - tl
-            for k, length in _pieces(ti, tl, tr, lo_, hi_, Ll_, Lr_, kmax):
-                if not np.any(length > 0):
-                    continue
-                on = length > 0
-                kk = min(k, kmax)  # k = kmax + 1 collects k > kmax: Fresnel loop stops at kmax
-                F = fresnel_product(fresnel, rho[on], phi0[on], tv[on] * np.ones(on.sum()),
-                                    np.full(on.sum(), float(kk)), kk)
-                acc[on] += (length[on] / width[on])[:, None] * F
-        total += wgt * acc.mean(axis=0)
+            acc += _albedo_runs(ti, tl, tr, lo_, hi_, Ll_, Lr_, rho, fresnel, kmax)
+        total += wgt * (W @ (acc / width[:, None]))
     return total
 
 
 # -- evaluation (symmetric) ------------------------------------------------------------------------
-def eval(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None):
+def eval(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None,
+         fresnel_bounces: int | None = None):
     """Symmetric-groove BRDF f(wi, wo) (RGB, without the cosine), summed over k = 1..kmax and
     both walls (seed eq. 5-7). For each sign of t = +-horizontal(wi + wo) and each k, the one
     candidate groove angle: theta_v = (theta_o - theta_i + pi - 2 pi j)/k (k even) or
     (pi - theta_i - theta_o + 2 pi j)/k (k odd), j chosen so that k theta_v lies in the window
-    (-theta_i, 3 pi/2 - theta_i) where G_k can be non-zero (at most one j)."""
+    (-theta_i, 3 pi/2 - theta_i) where G_k can be non-zero (at most one j; j depends on the
+    parity of k only, so every k is one row of a (k, direction) block).
+
+    kmax: the number of bounce terms summed, the truncation of the series (default
+    max_bounces(alpha): longer paths carry less than 1e-4 of the energy); kmax = 1 is the
+    single-bounce term alone. fresnel_bounces: Max Bounces, the first fresnel_bounces bounces
+    of a path get their Fresnel factor and later ones F = 1, as in the sampler (default: every
+    bounce). LeeBRDF.eval passes the derived bound as kmax and the user's Max Bounces as
+    fresnel_bounces, so its cost does not grow with Max Bounces."""
     fresnel = fresnel or fresnel_fn("none")
     wi = np.asarray(wi, dtype=float)
     wo = np.asarray(wo, dtype=float)
@@ -383,46 +495,50 @@ def eval(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None):
     wo = np.broadcast_to(wo, shape).reshape(-1, 3)
     if kmax is None:
         kmax = max_bounces(max(mf.alpha_x, mf.alpha_y), mf.distribution)
+    kmax = max(int(kmax), 1)
+    n_f = kmax if fresnel_bounces is None else max(int(fresnel_bounces), 1)
+    n = wi.shape[0]
     h = wi + wo
     t0, _ = groove_frame(h)
-    out = np.zeros(wi.shape[:-1] + (3,))
+    out = np.zeros((n, 3))
     valid = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     hh = np.hypot(h[:, 0], h[:, 1])
-    n3 = np.zeros_like(wi)
-    n3[:, 2] = 1.0
+    ks = np.arange(1.0, kmax + 1.0)[:, None]
+    even = np.mod(ks, 2.0) == 0.0
+    chunk = max(1, (1 << 18) // kmax)  # directions per (k, direction) block
     for sg in (1.0, -1.0):
         t = sg * t0
         theta_i = np.arctan2(np.sum(wi * t, -1), wi[:, 2])
         theta_o = np.arctan2(np.sum(wo * t, -1), wo[:, 2])
         rho = np.hypot(np.sum(wi * t, -1), wi[:, 2])
         c = 0.75 * PI - theta_i
-        for k in range(1, kmax + 1):
-            if k % 2 == 0:
-                X = theta_o - theta_i + PI
-                j = np.round((X - c) / (2.0 * PI))
-                ktv = X - 2.0 * PI * j
-            else:
-                X = PI - theta_i - theta_o
-                j = np.round((c - X) / (2.0 * PI))
-                ktv = X + 2.0 * PI * j
-            tv = ktv / k
-            ok = valid & (tv > 0.0) & (tv < PI)
+        X = theta_o - theta_i + PI  # k even
+        ktv_even = X - 2.0 * PI * np.round((X - c) / (2.0 * PI))
+        X = PI - theta_i - theta_o  # k odd
+        ktv_odd = X + 2.0 * PI * np.round((c - X) / (2.0 * PI))
+        for start in range(0, n, chunk):
+            sl = slice(start, start + chunk)
+            tv = np.where(even, ktv_even[sl], ktv_odd[sl]) / ks
+            ok = valid[sl] & (tv > 0.0) & (tv < PI)
             theta_s = 0.5 * (PI - tv)
-            G = np.where(ok, G_k_symmetric(theta_i, theta_s, float(k)), 0.0)
-            on = G > 0.0
-            if not np.any(on):
+            G = np.where(ok, G_k_symmetric(theta_i[sl], theta_s, ks), 0.0)
+            kk, pp = np.nonzero(G > 0.0)
+            if kk.size == 0:
                 continue
-            ts = theta_s[on]
-            s = np.sin(ts)[:, None] * t[on] + np.cos(ts)[:, None] * n3[on]
+            p = pp + start
+            k = ks[kk, 0]
+            ts, tvp = theta_s[kk, pp], tv[kk, pp]
+            s = np.sin(ts)[:, None] * t[p]
+            s[:, 2] += np.cos(ts)
             D = mf.D(s)
-            wis = rho[on] * np.cos(theta_i[on] - ts)
+            wis = rho[p] * np.cos(theta_i[p] - ts)
             # |(wi + wo).t| -> 0 is an integrable singularity of the Jacobian; the floor keeps
             # eval finite on that measure-zero set (the sampler, and the OSL twin, never eval).
-            jac = np.sin(ts) / (2.0 * k * np.maximum(hh[on], 1e-12))
-            F = fresnel_product(fresnel, rho[on], theta_i[on] + 0.5 * tv[on], tv[on],
-                                np.full(on.sum(), float(k)), k)
-            val = D * wis * G[on] * jac / (wi[on, 2] * wo[on, 2])
-            out[on] += val[:, None] * F
+            jac = np.sin(ts) / (2.0 * k * np.maximum(hh[p], 1e-12))
+            F = fresnel_product(fresnel, rho[p], theta_i[p] + 0.5 * tvp, tvp, k, n_f)
+            val = D * wis * G[kk, pp] * jac / (wi[p, 2] * wo[p, 2])
+            for ch in range(3):
+                out[:, ch] += np.bincount(p, weights=val * F[:, ch], minlength=n)
     return out.reshape(shape[:-1] + (3,))
 
 
@@ -466,7 +582,7 @@ def _partner_window(theta_i, theta_o, k: int):
 
 
 def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None,
-                    n_partner: int = 12):
+                    n_partner: int = 12, fresnel_bounces: int | None = None):
     """Asymmetric-groove BRDF f(wi, wo) (RGB, without the cosine), k = 1..kmax, isotropic D
     (docs/lee-asymmetric-grooves.md sec. 5):
 
@@ -489,7 +605,8 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
     (odd k: same frame, theta_i <-> theta_o; even k: the other frame, theta_l <-> theta_r), so
     f(wi, wo) = f(wo, wi) to rounding. The integrand has kinks where len_k reaches 0, so the
     rule converges algebraically (measured in the doc). fresnel is tabulated (FresnelTable:
-    exact at 8193 nodes, interpolation error < 1e-7)."""
+    exact at 8193 nodes, interpolation error < 1e-7). kmax and fresnel_bounces as in eval():
+    the terms summed, and Max Bounces (the bounces that get their Fresnel factor)."""
     if abs(mf.alpha_x - mf.alpha_y) > 1e-12 * mf.alpha_x:
         raise ValueError("asymmetric grooves are implemented for isotropic D only")
     fresnel = fresnel or fresnel_fn("none")
@@ -503,6 +620,7 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
     alpha = mf.alpha_x
     if kmax is None:
         kmax = max_bounces(alpha, mf.distribution, "asymmetric")
+    n_f = kmax if fresnel_bounces is None else max(int(fresnel_bounces), 1)
     Z = partner_norm(mf.distribution, alpha)
     x, w = np.polynomial.legendre.leggauss(n_partner)
     x, w = 0.5 * (x + 1.0), 0.5 * w  # on [0, 1]
@@ -613,8 +731,8 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
                 tl_, tr_ = tl[on], tr[on]
                 phi0 = theta_i[idx][row] + 0.5 * PI - tl_
                 tv = PI - tl_ - tr_
-                cosb = np.minimum(rho[idx][row][:, None] * np.abs(
-                    np.sin(phi0[:, None] + np.arange(k) * tv[:, None])), 1.0)
+                cosb = np.minimum(rho[idx][row][:, None] * np.abs(  # the first min(k, n_f)
+                    np.sin(phi0[:, None] + np.arange(min(k, n_f)) * tv[:, None])), 1.0)
                 contrib = val[:, None] * fresnel.product(cosb)
             for ch in range(3):
                 acc[idx, ch] += np.bincount(row, weights=contrib[:, ch], minlength=idx.size)
@@ -760,29 +878,47 @@ class FresnelTable:
         self.F = np.asarray(fresnel(self.c), dtype=float)
         self.constant = bool(np.all(self.F == self.F[0]))
 
+    def _index(self, c):
+        """Cell index and fraction of cosines c (NaN: index 0, flagged)."""
+        x = np.clip(c, 0.0, 1.0) * self.n
+        bad = np.isnan(x)
+        if bad.any():
+            x = np.where(bad, 0.0, x)
+        i = np.minimum(x.astype(np.int64), self.n - 1)
+        return i, x - i, bad
+
     def __call__(self, c):
         c = np.asarray(c, dtype=float)
         if self.constant:
             return np.broadcast_to(self.F[0], c.shape + (3,))
-        x = np.clip(c, 0.0, 1.0) * self.n
-        i = np.minimum(x.astype(np.int64), self.n - 1)
-        f = (x - i)[..., None]
-        return self.F[i] * (1.0 - f) + self.F[i + 1] * f
+        i, f, bad = self._index(c)
+        f = f[..., None]
+        out = self.F[i] * (1.0 - f) + self.F[i + 1] * f
+        return np.where(bad[..., None], np.nan, out) if bad.any() else out
 
-    def product(self, c):
+    def product(self, c, count=None):
         """prod over the last axis of self(c), (..., 3): the same interpolation, gathered per
-        channel from contiguous tables (3x faster than self(c) then np.prod)."""
+        channel from contiguous tables (3x faster than self(c) then np.prod). With `count`
+        (shape c.shape[:-1]) only the first `count` factors of each row are taken (the others
+        are 1: a slot past the table's end holds 1 exactly)."""
         c = np.asarray(c, dtype=float)
         if self.constant:
-            return np.broadcast_to(self.F[0] ** c.shape[-1], c.shape[:-1] + (3,))
+            if count is None:
+                return np.broadcast_to(self.F[0] ** c.shape[-1], c.shape[:-1] + (3,))
+            m = np.clip(np.asarray(count), 0, c.shape[-1])[..., None]
+            return np.broadcast_to(self.F[0] ** m, c.shape[:-1] + (3,))
         if not hasattr(self, "_rows"):
-            self._rows = [(np.ascontiguousarray(self.F[:-1, ch]),
-                           np.ascontiguousarray(self.F[1:, ch] - self.F[:-1, ch]))
+            self._rows = [(np.append(self.F[:-1, ch], 1.0),
+                           np.append(self.F[1:, ch] - self.F[:-1, ch], 0.0))
                           for ch in range(3)]
-        x = np.clip(c, 0.0, 1.0) * self.n
-        i = np.minimum(x.astype(np.int64), self.n - 1)
-        f = x - i
-        return np.stack([np.prod(a[i] + f * d[i], axis=-1) for a, d in self._rows], axis=-1)
+        i, f, bad = self._index(c)
+        if count is not None:
+            past = np.arange(c.shape[-1]) >= np.asarray(count)[..., None]
+            i = np.where(past, self.n, i)
+            f = np.where(past, 0.0, f)
+            bad = bad & ~past
+        out = np.stack([np.prod(a[i] + f * d[i], axis=-1) for a, d in self._rows], axis=-1)
+        return np.where(bad.any(-1)[..., None], np.nan, out) if bad.any() else out
 
 
 def moments(mu, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax: int | None = None,
@@ -792,7 +928,7 @@ def moments(mu, mf: Microfacet, fresnel=None, groove: str = "symmetric", kmax: i
     integral f cos_o wo dwo. The same integral as albedo(), organised for speed:
     grooves on a midpoint grid in smooth variables (_groove_nodes), the entry offsets
     integrated exactly (the beam splits into runs of equal bounce count whose lengths are
-    closed form, _pieces' rule), each run's exit direction exact (it depends on k only).
+    closed form, _albedo_runs' rule), each run's exit direction exact (it depends on k only).
     Runs are walked in blocks of bounces (1, 1, 2, 4, 8, ...) with the Fresnel product kept
     cumulatively (frozen after kmax, as the sampler) until every run has left, so the cost is
     about the number of grooves times the mean bounce count, whatever kmax. Convergence in the node counts and agreement with lee.sample Monte Carlo:
@@ -889,7 +1025,14 @@ class LeeBRDF:
     moments for the sphere-grid reference (quadrature.tabulate_moments uses
     `directional_moments` when a BSDF has one: the generic quadrature integrates single-facet
     lobes around reflect(wi, m), which multi-bounce lobes are not). Both evaluations sum
-    k = 1 .. kmax (paths beyond carry < 1e-4 of the energy) and are reciprocal to rounding."""
+    k = 1 .. kterms, the derived bound (paths beyond carry < 1e-4 of the energy), and are
+    reciprocal to rounding.
+
+    Max Bounces (`kmax`, the catalog's max_bounces; 0 = the derived bound) has one meaning
+    everywhere, sampler, eval, moments and the OSL shader: the first kmax bounces of a path get
+    their Fresnel factor, later bounces reflect with F = 1, and every path is followed to its
+    exact exit. So a low limit brightens and desaturates (never darkens) a conductor, and with
+    F = 1 nothing changes: the furnace stays exactly 1 at any limit."""
 
     masking = "vcavity"  # for code that asks; the model has its own multi-bounce masking
 
@@ -905,9 +1048,18 @@ class LeeBRDF:
         self.tint = np.asarray(tint, dtype=float)
         self.diffuse_albedo = np.zeros(3)
         self.is_delta = mf.delta
-        self.kmax = kmax_for(max(mf.alpha_x, mf.alpha_y), mf.distribution, groove,
-                             max_bounces_param)
+        alpha = max(mf.alpha_x, mf.alpha_y)
+        # Max Bounces: the bounces of a path that get their Fresnel factor (later ones F = 1;
+        # every path is followed to its exit), in the sampler, eval and the moments alike.
+        self.kmax = kmax_for(alpha, mf.distribution, groove, max_bounces_param)
+        # The terms eval sums: the derived bound whatever Max Bounces (longer paths carry less
+        # than 1e-4 of the energy), so eval's cost does not grow with Max Bounces.
+        self.kterms = kmax_for(alpha, mf.distribution, groove, 0.0)
         self.quad = dict(quad or {})
+        # Sampler and eval use the Fresnel tabulated (interpolation error < 1e-7 per bounce,
+        # float32's level; the exact formula per bounce dominated their cost); self.fresnel
+        # stays the exact callable.
+        self._fresnel_table = FresnelTable(self.fresnel)
 
     def delta_reflectance(self, wi):
         """Roughness 0: one mirror bounce, tint F(wi.n) (zeros otherwise)."""
@@ -925,7 +1077,7 @@ class LeeBRDF:
             wi = np.broadcast_to(wi, shape)
             return (wi * np.array([-1.0, -1.0, 1.0]), self.delta_reflectance(wi),
                     np.ones(shape[:-1], dtype=np.int64))
-        wo, w, k = sample(wi, u, self.mf, self.fresnel, self.groove, self.kmax)
+        wo, w, k = sample(wi, u, self.mf, self._fresnel_table, self.groove, self.kmax)
         return wo, w * self.tint, k
 
     def eval(self, wi, wo):
@@ -933,10 +1085,9 @@ class LeeBRDF:
         if self.is_delta:
             return np.zeros(np.broadcast_shapes(np.shape(wi), np.shape(wo)))
         if self.groove == "symmetric":
-            return eval(wi, wo, self.mf, self.fresnel, self.kmax) * self.tint
-        if not hasattr(self, "_fresnel_table"):
-            self._fresnel_table = FresnelTable(self.fresnel)
-        return eval_asymmetric(wi, wo, self.mf, self._fresnel_table, self.kmax) * self.tint
+            return eval(wi, wo, self.mf, self._fresnel_table, self.kterms, self.kmax) * self.tint
+        return eval_asymmetric(wi, wo, self.mf, self._fresnel_table, self.kterms,
+                               fresnel_bounces=self.kmax) * self.tint
 
     eval_specular = eval
 
