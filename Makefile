@@ -13,8 +13,12 @@ VENV_SH := scripts/venv.sh
 PY = $$($(VENV_SH) requirements.txt)
 COMPAT ?= 4.2 4.5 5.0
 # The compatibility suite: install the zip, build every node group and check it compiled, apply
-# and render every preset, a white-furnace sphere against the numpy reference, the CLI.
-COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py tests/test_harness.py
+# and render every preset, a white-furnace sphere against the numpy reference, the CLI; the
+# node sockets, preset operator, scene specialization, a saved .blend rendered without the
+# add-on, and the report's smoke run.
+COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py \
+	tests/test_harness.py tests/test_nodes.py tests/test_presets.py tests/test_specialize.py \
+	tests/test_portability.py tests/test_report.py
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace clean
 

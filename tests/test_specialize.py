@@ -14,7 +14,7 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import nodes, presets, specialize  # noqa: E402
+from addon import compat, nodes, presets, specialize  # noqa: E402
 
 from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS  # noqa: E402
@@ -86,7 +86,7 @@ def test_specialised_render_equals_unspecialised_and_is_smaller(tmp_path):
 def test_bounce_rules_follow_the_materials():
     scene, _ = build()
     # A visible glass object: transmission stays, depth keeps the scene's values.
-    glass = bpy.data.materials.new("glass")
+    glass = compat.new_node_material("glass")
     tree = glass.node_tree
     out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
     bsdf = tree.nodes.new("ShaderNodeBsdfGlass")
