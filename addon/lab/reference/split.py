@@ -1,0 +1,235 @@
+"""The light-sampled estimator in numpy: a model split into Cycles' native GGX closure and a
+non-negative stochastic residual (the twin of the split in osl/microfacet.h and the Walter
+shaders; design and measurements: docs/light-sampling.md).
+
+    f(wi, wo) = c(wi) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
+
+f_ggx is height-correlated Smith GGX with F = 1 and the model's own alphas, which is exactly
+Cycles' `microfacet("ggx", N, U, ax, ay, 0, 0)`: Cycles light-samples it (lamps, world, emissive
+meshes, with multiple importance sampling). The residual r is the stochastic delta lobe of the
+model's own sampler, weighted by (f - c f_ggx) cos / pdf. It must never be negative, because
+Cycles drops negative closure weights; so c(wi) is a lower bound of f / f_ggx over every wo a
+reflection can reach from wi, per RGB channel:
+
+    f / f_ggx = tint F(wi.h) G2(wi, wo) / G2_hc(wi, wo)
+    c(wi)     = tint F_lo(wi) G_lo(wi)
+
+- F_lo: the least Fresnel factor over the reachable wi.h in [cos(pi/4 + theta_i/2), 1] (wo on
+  the horizon opposite wi gives the lowest), found by a golden-section search (conductor and
+  dielectric Fresnel are unimodal in wi.h; tests/test_reference_split.py checks it on dense
+  grids) and lowered by a relative margin that covers the search's resolution and float
+  rounding; F = 1 (none): 1.
+- G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) = 1 / (1 + Li)
+  (Heitz 2014 eqs. 98, 99; approached as wo grazes).
+Beckmann has no such bound (its tail falls faster than GGX's), so it stays stochastic.
+
+The shader returns one of the two parts per sample, never both (`split_closures` in
+microfacet.h, `selection_probability` here): when Cycles samples a singular closure it adds the
+other closures' values in that direction with the balance heuristic and a singular pdf of 1e6,
+which biases a sharp native lobe beside a delta residual. Choosing the part with probability q
+and dividing by q keeps the sum exact.
+
+Glass splits its reflection lobe the same way (the transmission stays stochastic): the lobe is
+chosen with probability F, so the residual's reflection weight is G2 - (c / F) G2_hc per unit
+of the stochastic factor.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .bsdf import MicrofacetBRDF
+from .fresnel import fresnel_conductor, fresnel_dielectric
+from .glass import MicrofacetGlass
+from .microfacet import Microfacet, dot, normalize, reflect
+
+ESTIMATORS = ("light_sampled", "stochastic")
+# Below this alpha (roughness 0.032) the lobe is nearly a mirror: Cycles' near-specular GGX and
+# our delta lobe would meet in a region nobody can light-sample; stay stochastic.
+ALPHA_SPLIT_MIN = 1e-3
+# Golden-section steps for the conductor's Fresnel minimum: the bracket shrinks to
+# 0.618^24 = 1e-5 of [cos_lo, 1], so the value found exceeds the true minimum by ~F'' 1e-11.
+MIN_SEARCH_STEPS = 24
+# Relative margin under the minimum found: covers the search and float32 rounding in OSL.
+FRESNEL_MARGIN = 1e-5
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+# Neither part is chosen with a probability below this (its weight grows at most 20 times).
+SPLIT_Q_MIN = 0.05
+
+
+def reachable_cos_lo(wi):
+    """Least wi.h over reflected directions wo (wo.z >= 0): wo on the horizon opposite wi,
+    at angle pi/2 + theta_i from wi, so wi.h = cos(pi/4 + theta_i / 2)."""
+    theta = np.arccos(np.clip(np.asarray(wi, dtype=float)[..., 2], -1.0, 1.0))
+    return np.maximum(np.cos(0.25 * math.pi + 0.5 * theta), 0.0)
+
+
+def fresnel_min(F, lo, hi=1.0, steps: int = MIN_SEARCH_STEPS):
+    """min of a unimodal F(x) over x in [lo, hi], by golden section (the OSL twin runs the same
+    steps): the smallest value visited, times (1 - FRESNEL_MARGIN). lo (..., 3), F(x) (..., 3)."""
+    a, b = lo, np.broadcast_to(hi, np.shape(lo)) * 1.0
+    x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+    f1, f2 = F(x1), F(x2)
+    best = np.minimum(F(a), F(b))
+    for _ in range(steps):
+        best = np.minimum(best, np.minimum(f1, f2))
+        left = f1 < f2  # the minimum lies in [a, x2], else in [x1, b]
+        a, b = np.where(left, a, x1), np.where(left, x2, b)
+        xn = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
+        fn = F(xn)
+        x1, f1, x2, f2 = (np.where(left, xn, x2), np.where(left, fn, f2),
+                          np.where(left, x1, xn), np.where(left, f1, fn))
+    best = np.minimum(best, np.minimum(f1, f2))
+    return best * (1.0 - FRESNEL_MARGIN)
+
+
+def critical_cos(eta):
+    """cos of the critical angle of total internal reflection (0 for eta >= 1): left of it F is
+    a plateau at 1, which only rounding would tilt, so the search starts there."""
+    eta = np.asarray(eta, dtype=float)
+    return np.sqrt(np.maximum(1.0 - eta * eta, 0.0))
+
+
+def fresnel_lower_bound(bsdf, wi):
+    """F_lo(wi) (..., 3): the least Fresnel factor over the wi.h a reflection can reach."""
+    wi = np.asarray(wi, dtype=float)
+    lo = reachable_cos_lo(wi)[..., None] * np.ones(3)
+    if isinstance(bsdf, MicrofacetGlass) or bsdf.fresnel == "dielectric":
+        # Monotone for eta > 1; inside a denser medium (eta < 1) it dips near Brewster's angle,
+        # right of the total-internal-reflection plateau F = 1.
+        eta = bsdf.eta if isinstance(bsdf, MicrofacetGlass) else bsdf.ior
+        return fresnel_min(lambda x: fresnel_dielectric(x, eta), np.maximum(lo, critical_cos(eta)))
+    if bsdf.fresnel == "conductor":
+        return conductor_min(bsdf.n, bsdf.k, lo)
+    return np.ones_like(lo)
+
+
+def conductor_min(n, k, lo):
+    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption F has
+    a near-plateau left of the critical angle and a dip just right of it, as narrow as 1e-6 in
+    wi.h: search the two sides of the critical angle separately (k = 0: the plateau is 1)."""
+    xc = np.broadcast_to(critical_cos(n), np.shape(lo))
+    split_at = np.maximum(lo, xc)
+
+    def F(x):
+        return fresnel_conductor(x, n, k)
+
+    right = fresnel_min(F, split_at)
+    left = np.where(np.asarray(k) > 0.0, fresnel_min(F, lo, split_at), 1.0)
+    return np.minimum(left, right)
+
+
+def masking_lower_bound(bsdf, wi):
+    """G_lo(wi) (...,): inf over wo of G2 / G2_hc (1 for height-correlated masking)."""
+    wi = np.asarray(wi, dtype=float)
+    if bsdf.masking == "separable":
+        return 1.0 / (1.0 + bsdf.mf.lambda_(wi))
+    return np.ones(wi.shape[:-1])
+
+
+def supports_split(bsdf) -> bool:
+    """Whether the light-sampled estimator splits this BSDF (else it renders stochastically):
+    GGX, rough enough, and not the index-matched glass."""
+    if not isinstance(bsdf, (MicrofacetBRDF, MicrofacetGlass)):
+        return False
+    if isinstance(bsdf, MicrofacetBRDF) and bsdf.masking == "vcavity":
+        return False
+    if isinstance(bsdf, MicrofacetGlass) and bsdf.is_passthrough:
+        return False
+    mf = bsdf.mf
+    return mf.ggx and not mf.delta and min(mf.alpha_x, mf.alpha_y) >= ALPHA_SPLIT_MIN
+
+
+def native_factor(bsdf, wi):
+    """c(wi) / tint (..., 3) = F_lo G_lo: the native closure's weight without the tint; 0 below
+    the horizon and for BSDFs the split does not support."""
+    wi = np.asarray(wi, dtype=float)
+    if not supports_split(bsdf):
+        return np.zeros(wi.shape[:-1] + (3,))
+    c = fresnel_lower_bound(bsdf, wi) * masking_lower_bound(bsdf, wi)[..., None]
+    return np.where((wi[..., 2] > 0.0)[..., None], c, 0.0)
+
+
+def native_weight(bsdf, wi):
+    """c(wi) (..., 3): the weight of the native closure, tint included."""
+    return bsdf.tint * native_factor(bsdf, wi)
+
+
+def native_ggx(bsdf) -> MicrofacetBRDF:
+    """Cycles' native part: height-correlated GGX, F = 1, the model's alphas, unit tint."""
+    mf = Microfacet("ggx", bsdf.mf.alpha_x, bsdf.mf.alpha_y)
+    return MicrofacetBRDF(mf, "height_correlated", "vndf", "none")
+
+
+def eval_native(bsdf, wi, wo):
+    """c(wi) f_ggx(wi, wo) (..., 3): what the native closure carries."""
+    return native_weight(bsdf, wi) * native_ggx(bsdf).eval(wi, wo)
+
+
+def eval_residual(bsdf, wi, wo):
+    """r = f - c f_ggx (..., 3): what the stochastic lobe carries (>= 0 by construction)."""
+    return bsdf.eval(wi, wo) - eval_native(bsdf, wi, wo)
+
+
+def residual_weight_reflection(bsdf, wi, wo, m, inv_pdf_factor):
+    """The residual's reflection sample weight (..., 3), as the OSL computes it:
+    tint inv_pdf_factor (F G2 - c' G2_hc), c' = F_lo G_lo (no tint), clamped at 0 against
+    rounding. inv_pdf_factor is the sampler's f cos / (F G2 pdf) (bsdf.py `sample`)."""
+    mf = bsdf.mf
+    g2 = mf.G2(wi, wo, m, bsdf.masking)[..., None]
+    g2_hc = mf.G2(wi, wo, m, "height_correlated")[..., None]
+    F = bsdf.F(dot(wi, m))
+    w = np.asarray(inv_pdf_factor)[..., None] * (F * g2 - native_factor(bsdf, wi) * g2_hc)
+    return bsdf.tint * np.maximum(w, 0.0)
+
+
+def sample_residual(bsdf, wi, u):
+    """One sample of the residual lobe of a reflection BSDF: (wo, weight), weight =
+    r cos / pdf with the model's own sampler (its visible-normal or D cos density)."""
+    wi = np.asarray(wi, dtype=float)
+    u = np.asarray(u, dtype=float)
+    shape = np.broadcast_shapes(wi.shape, u.shape)
+    wi, u = np.broadcast_to(wi, shape), np.broadcast_to(u, shape)
+    m, _ = bsdf.sample_normal(wi, u)
+    wo = reflect(wi, m)
+    c = dot(wi, m)
+    mf = bsdf.mf
+    if bsdf.sampler == "dcos":
+        inv = np.abs(c) / (np.where(wi[..., 2] > 0, wi[..., 2], 1.0) * np.maximum(m[..., 2], 1e-30))
+    else:
+        g1 = mf.G1(wi, m)
+        inv = np.where(g1 > 0.0, 1.0 / np.where(g1 > 0.0, g1, 1.0), 0.0)
+    valid = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0) & (c > 0.0)
+    w = residual_weight_reflection(bsdf, wi, wo, m, np.where(valid, inv, 0.0))
+    return wo, np.where(valid[..., None], w, 0.0)
+
+
+def albedo_share(bsdf, wi, n: int = 1 << 16, seed: int = 0):
+    """Share of the directional albedo the native closure carries at each wi (..., 3) and
+    its standard error: c(wi) E_ggx(wi) / E(wi), both albedos by Monte Carlo with n samples
+    (E_ggx with GGX visible normals, weight G2_hc / G1; E with the model's sampler)."""
+    wi = normalize(np.asarray(wi, dtype=float).reshape(-1, 3))
+    rng = np.random.default_rng(seed)
+    u = rng.random((n, 1, 3))
+    _, w_model, _ = bsdf.sample(wi[None], u)
+    _, w_ggx, _ = native_ggx(bsdf).sample(wi[None], u)
+    c = native_weight(bsdf, wi)
+    E, E_ggx = w_model.mean(axis=0), w_ggx.mean(axis=0)
+    share = np.where(E > 0, c * E_ggx / np.where(E > 0, E, 1.0), 0.0)
+    # Delta method on the ratio of two means of the same samples.
+    cov = ((w_ggx - E_ggx) * (w_model - E)).mean(axis=0)
+    var_r = (w_ggx.var(axis=0) / np.maximum(E_ggx, 1e-30) ** 2 + w_model.var(axis=0)
+             / np.maximum(E, 1e-30) ** 2 - 2 * cov / np.maximum(E * E_ggx, 1e-30))
+    err = np.abs(share) * np.sqrt(np.maximum(var_r, 0.0) / n)
+    return share, err
+
+
+def selection_probability(w_native, w_residual):
+    """q, the probability of returning the native part rather than the residual (the OSL's
+    split_closures): proportional to the channel sums of their weights, clamped to
+    [SPLIT_Q_MIN, 1 - SPLIT_Q_MIN] when both are non-zero; 1 or 0 when one of them is zero."""
+    a = np.maximum(np.sum(w_native, axis=-1), 0.0)
+    r = np.maximum(np.sum(w_residual, axis=-1), 0.0)
+    q = np.clip(a / np.where(a + r > 0, a + r, 1.0), SPLIT_Q_MIN, 1.0 - SPLIT_Q_MIN)
+    return np.where(r <= 0.0, 1.0, np.where(a <= 0.0, 0.0, q))

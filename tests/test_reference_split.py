@@ -1,0 +1,165 @@
+"""The light-sampled split (addon/lab/reference/split.py, twin of osl/microfacet.h): the native
+part c(wi) f_ggx must stay under the model for every reachable wo, or Cycles would drop the
+residual's negative weights and the render would be too dark; the residual sampler must carry
+exactly f - c f_ggx; the OSL constants must be the numpy ones.
+
+What this catches: a Fresnel minimum that misses a dip (conductors near grazing, dielectrics
+seen from inside near the critical angle), a wrong reachable range of wi.h, a masking bound that
+is not a bound (separable), a residual weight that forgets a factor."""
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addon.lab.reference import fresnel_conductor, fresnel_dielectric, make_bsdf
+from addon.lab.reference import split
+from addon.lab.reference.microfacet import normalize
+
+ROOT = Path(__file__).resolve().parent.parent
+NS = np.exp(np.linspace(np.log(0.001), np.log(100.0), 41))  # the catalog's range of N
+KS = np.concatenate([[0.0, 1e-4, 1e-2], np.exp(np.linspace(np.log(0.05), np.log(100.0), 25))])
+LOS = (0.0, 0.05, 0.3, 0.7071, 0.95)
+X = np.concatenate([np.linspace(0.0, 1e-3, 2001), np.linspace(1e-3, 0.99, 20001),
+                    np.linspace(0.99, 1.0, 20001)])
+
+
+def _dense_min(F, lo):
+    x = X[X >= lo]
+    return F(x).min(axis=0)
+
+
+@pytest.mark.parametrize("lo", LOS)
+def test_conductor_fresnel_minimum_is_a_tight_lower_bound(lo):
+    n, k = np.meshgrid(NS, KS)
+    n, k = n.ravel(), k.ravel()
+    found = split.conductor_min(n, k, np.full(n.shape, float(lo)))
+    dense = _dense_min(lambda x: fresnel_conductor(x[:, None], n, k), lo)
+    assert np.all(found <= dense), (n[found > dense], k[found > dense])
+    # Tight (within the margin) where the grid resolves the dip right of the critical angle
+    # (for n << 1 it is narrower than the grid; the search is not).
+    resolved = (n >= 1.0) | (1.0 - split.critical_cos(n) > 0.05)
+    assert np.all((found >= dense * (1.0 - 1e-4))[resolved])  # grid spacing 5e-5 in x
+
+
+@pytest.mark.parametrize("lo", LOS)
+def test_dielectric_fresnel_minimum_on_both_sides_of_the_interface(lo):
+    eta = np.exp(np.linspace(np.log(0.01), np.log(100.0), 401))
+    lo_v = np.maximum(lo, split.critical_cos(eta))
+    found = split.fresnel_min(lambda x: fresnel_dielectric(x, eta), lo_v[None, :] * 1.0)[0]
+    dense = _dense_min(lambda x: fresnel_dielectric(x[:, None], eta), lo)
+    assert np.all(found <= dense + 1e-15)  # eta = 1 + 1e-15 reflects 1e-31: rounding only
+    resolved = (eta >= 1.0) | (1.0 - split.critical_cos(eta) > 0.05)
+    assert np.all((found >= dense * (1.0 - 1e-4))[resolved])
+    # Inside a dense medium the minimum is not F(1) (the dip by Brewster's angle).
+    assert np.any(dense < fresnel_dielectric(1.0, eta) * (1 - 1e-3))
+
+
+def test_reachable_range_is_the_least_wi_dot_h():
+    rng = np.random.default_rng(3)
+    wi = normalize(rng.normal(size=(400, 3)) * [1, 1, 1])
+    wi[:, 2] = np.abs(wi[:, 2])
+    wo = normalize(rng.normal(size=(4000, 3)))
+    wo[:, 2] = np.abs(wo[:, 2])
+    h = normalize(wi[:, None] + wo[None])
+    least = np.einsum("ijk,ik->ij", h, wi).min(axis=1)
+    lo = split.reachable_cos_lo(wi)
+    assert np.all(least >= lo - 1e-12)
+    # The bound is reached: wo on the horizon opposite wi.
+    opposite = normalize(np.stack([-wi[:, 0], -wi[:, 1], np.zeros(len(wi))], axis=1))
+    h = normalize(wi + opposite)
+    assert np.allclose(np.einsum("ij,ij->i", h, wi), lo, atol=1e-9)
+
+
+def random_values(rng, model_id):
+    v = dict(roughness=float(rng.uniform(0.04, 1.0)),
+             masking=str(rng.choice(["height_correlated", "separable"])))
+    if model_id == "walter_reflection":
+        v.update(anisotropy=float(rng.choice([0.0, rng.uniform(0, 1)])),
+                 fresnel_type=str(rng.choice(["conductor", "dielectric", "none"])),
+                 ior=float(np.exp(rng.uniform(np.log(0.01), np.log(100)))),
+                 n=tuple(np.exp(rng.uniform(np.log(0.001), np.log(100), 3))),
+                 k=tuple(rng.uniform(0, 10, 3) * rng.choice([0, 1, 10])))
+    else:
+        v.update(ior=float(np.exp(rng.uniform(np.log(0.05), np.log(20)))))
+    return v
+
+
+@pytest.mark.parametrize("model_id", ["walter_reflection", "walter_glass"])
+def test_residual_is_never_negative(model_id):
+    rng = np.random.default_rng(11)
+    for _ in range(150):
+        values = random_values(rng, model_id)
+        bsdf = make_bsdf(model_id, values)
+        assert split.supports_split(bsdf)
+        wi = normalize(rng.normal(size=(1500, 3)))
+        wi[:, 2] = np.abs(wi[:, 2])
+        wo = normalize(rng.normal(size=(1500, 3)))
+        wo[:, 2] = np.abs(wo[:, 2])
+        f = bsdf.eval(wi, wo)
+        r = split.eval_residual(bsdf, wi, wo)
+        assert np.all(r >= -1e-12 * np.maximum(f, 1.0)), values
+
+
+def test_split_is_only_offered_where_it_is_exact():
+    assert not split.supports_split(make_bsdf("walter_reflection", {"distribution": "beckmann"}))
+    assert not split.supports_split(make_bsdf("walter_reflection", {"roughness": 0.01}))
+    assert not split.supports_split(make_bsdf("cook_torrance", {}))
+    assert not split.supports_split(make_bsdf("walter_glass", {"ior": 1.0}))
+    assert split.supports_split(make_bsdf("walter_reflection", {"roughness": 0.04}))
+
+
+@pytest.mark.parametrize("values", [
+    {"fresnel_type": "conductor", "roughness": 0.5},
+    {"fresnel_type": "conductor", "roughness": 0.8, "masking": "separable", "anisotropy": 0.6},
+    {"fresnel_type": "dielectric", "ior": 0.4, "roughness": 0.3},
+])
+def test_residual_sampler_carries_f_minus_the_native_part(values):
+    """mean residual weight = E - c E_ggx, the three albedos from independent streams."""
+    bsdf = make_bsdf("walter_reflection", values)
+    rng = np.random.default_rng(5)
+    n = 1 << 17
+    for theta in (0.0, 50.0, 80.0):
+        t = np.radians(theta)
+        wi = np.array([np.sin(t) * 0.8, np.sin(t) * 0.6, np.cos(t)])
+        _, w_r = split.sample_residual(bsdf, wi, rng.random((n, 3)))
+        _, w_f, _ = bsdf.sample(wi, rng.random((n, 3)))
+        _, w_g, _ = split.native_ggx(bsdf).sample(wi, rng.random((n, 3)))
+        assert np.all(w_r >= 0.0)
+        c = split.native_weight(bsdf, wi)
+        expected = w_f.mean(0) - c * w_g.mean(0)
+        se = np.sqrt((w_r.var(0) + w_f.var(0) + (c ** 2) * w_g.var(0)) / n)
+        assert np.all(np.abs(w_r.mean(0) - expected) < 5 * se + 1e-9), (theta, w_r.mean(0), expected)
+
+
+def test_gold_native_share_at_normal_incidence():
+    """What the split is for: at roughness 0.5 Cycles' native GGX carries over 99% of gold's
+    albedo at normal incidence (the residual, which finds lamps only by chance, under 1%)."""
+    share, err = split.albedo_share(make_bsdf("walter_reflection", {"roughness": 0.5}),
+                                    np.array([0.0, 0.0, 1.0]), n=1 << 15)
+    assert np.all(share - 3 * err > 0.99) and np.all(share < 1.0 + 3 * err)
+
+
+def test_osl_constants_match_the_twin():
+    header = (ROOT / "osl" / "microfacet.h").read_text()
+
+    def define(name):
+        return float(re.search(rf"#define {name} (\S+)", header).group(1))
+
+    assert define("MFL_ALPHA_SPLIT_MIN") == split.ALPHA_SPLIT_MIN
+    assert define("MFL_MIN_SEARCH_STEPS") == split.MIN_SEARCH_STEPS
+    assert define("MFL_FRESNEL_MARGIN") == split.FRESNEL_MARGIN
+    assert abs(define("MFL_GOLDEN") - split._GOLDEN) < 1e-15
+    assert define("MFL_SPLIT_Q_MIN") == split.SPLIT_Q_MIN
+
+
+def test_one_part_per_sample_keeps_the_sum():
+    """E[part / probability] = native + residual for the shader's choice of one part."""
+    rng = np.random.default_rng(2)
+    w_n = rng.random((1000, 3)) * rng.choice([0, 1], (1000, 1))
+    w_r = rng.random((1000, 3)) * rng.choice([0, 1, 1e-3], (1000, 1))
+    q = split.selection_probability(w_n, w_r)
+    assert np.all((q >= 0) & (q <= 1))
+    expected = q[:, None] * np.where(q[:, None] > 0, w_n / np.maximum(q, 1e-300)[:, None], 0) + \
+        (1 - q)[:, None] * np.where(q[:, None] < 1, w_r / np.maximum(1 - q, 1e-300)[:, None], 0)
+    assert np.allclose(expected, w_n + w_r)
