@@ -173,6 +173,15 @@ ENUM_ITEMS: dict[str, tuple[tuple[str, str, str], ...]] = {
         ("symmetric", "Symmetric", "Both walls of a groove slope alike"),
         ("asymmetric", "Asymmetric", "The walls of a groove slope independently"),
     ),
+    # docs/light-sampling.md: the native part plus a non-negative stochastic residual.
+    "estimator": (
+        ("light_sampled", "Native + Residual",
+         "Cycles aims rays at lamps, the sun and bright sky for most of the reflection, so "
+         "highlights clear up as fast as with Cycles' own BSDFs (GGX only)"),
+        ("stochastic", "Stochastic",
+         "The teaching form: one random mirror direction per sample, which finds lamps only "
+         "by chance (far noisier under small lamps and the sun)"),
+    ),
 }
 ENUMS: dict[str, tuple[str, ...]] = {
     enum: tuple(item for item, _, _ in entries) for enum, entries in ENUM_ITEMS.items()}
@@ -193,6 +202,14 @@ FRESNEL_DOC = ("How reflection strength changes with the viewing angle: Conducto
 # docs/models.md, sec. 2.
 MASKING_DOC = ("How microfacets shadow one another: Height-correlated as in Cycles, or Separable "
                "as in the 2007 paper (a little darker at grazing angles on rough surfaces).")
+
+# Same converged image either way: only the noise changes (docs/light-sampling.md).
+ESTIMATOR = Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
+                  doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky "
+                      "for most of the reflection, so highlights from small lamps clear up "
+                      "fast (GGX only; Beckmann and near-mirror roughness render "
+                      "stochastically). Stochastic finds lamps only by chance. Both converge "
+                      "to the same image.")
 
 MODELS: dict[str, Model] = {}
 
@@ -257,6 +274,7 @@ WALTER_REFLECTION = _add(Model(
               doc=FRESNEL_DOC),
         IOR, CONDUCTOR_N, CONDUCTOR_K,
         Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
+        ESTIMATOR,
     ),
 ))
 
@@ -286,6 +304,7 @@ WALTER_GLASS = _add(Model(
         Param("masking", "Masking", ENUM, "height_correlated", items=ENUMS["masking"],
               doc=MASKING_DOC),
         Param("sampler", "Sampler", ENUM, "vndf", items=SAMPLERS[:2], doc=SAMPLER_DOC),
+        ESTIMATOR,
     ),
 ))
 

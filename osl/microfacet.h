@@ -138,6 +138,16 @@ color fresnel_conductor(float cos_i, color n, color k)
                  fresnel_conductor(cos_i, n[2], k[2]));
 }
 
+// The Fresnel factor of a model's Fresnel choice, per channel (1 for none).
+color fresnel_color(int fresnel_type, float cos_i, float ior, color n, color k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return fresnel_conductor(cos_i, n, k);
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return color(fresnel_dielectric(cos_i, ior));
+    return color(1.0);
+}
+
 // Inverse error function: Giles 2010, "Approximating the erfinv function" (single precision).
 float erfinv(float x_in)
 {
@@ -329,20 +339,14 @@ vector sample_vcavity(int dist, vector wi, float ax, float ay, float u1, float u
 }
 
 // ---------------------------------------------------------------------------------------
-// One reflection sample of a single-scattering microfacet BRDF: returns the normal m that
-// mirrors wi into wo, and the sample weight without Fresnel, f cos / (F pdf), in closed form
-// per sampler (seed eq. 4-7 and fig. 12; Heitz & d'Eon 2014 eq. 8; Heitz 2014 sec. 6):
-//   dcos:    G2 |wi.m| / (|wi.n| |m.n|)        (unbounded)
-//   vndf:    G2 / G1(wi)                       (Smith G1 of `dist`; in [0, 1] for Smith G2)
-//   vcavity: G2 / G1_vcavity(wi, m)            (in [0, 1] for V-cavity G2)
-float sample_reflection(int sampler, int dist, int masking, vector wi, float ax, float ay,
-                        vector key, output vector m)
+// The sampler's part of the reflection sample weight, f cos / (F G2 pdf): the normal m and
+// 1 / (pdf factor) per sampler, as listed above (0 where the sample is invalid).
+float sample_reflection_factor(int sampler, int dist, vector wi, float ax, float ay, vector key,
+                               output vector m)
 {
     m = vector(0, 0, 1);
     if (wi[2] <= 0.0)
         return 0.0;
-    if (max(ax, ay) < MFL_ALPHA_DELTA)
-        return 1.0;  // perfect mirror: G2 = G1 = 1
     float u1 = rng(key, 0);
     float u2 = rng(key, 1);
     float inv_pdf_factor;
@@ -360,8 +364,135 @@ float sample_reflection(int sampler, int dist, int masking, vector wi, float ax,
         float g1 = G1_vcavity(wi, m);
         inv_pdf_factor = (g1 > 0.0) ? 1.0 / g1 : 0.0;
     }
+    return (dot(wi, m) > 0.0) ? inv_pdf_factor : 0.0;
+}
+
+// One reflection sample of a single-scattering microfacet BRDF: returns the normal m that
+// mirrors wi into wo, and the sample weight without Fresnel, f cos / (F pdf), in closed form
+// per sampler (seed eq. 4-7 and fig. 12; Heitz & d'Eon 2014 eq. 8; Heitz 2014 sec. 6):
+//   dcos:    G2 |wi.m| / (|wi.n| |m.n|)        (unbounded)
+//   vndf:    G2 / G1(wi)                       (Smith G1 of `dist`; in [0, 1] for Smith G2)
+//   vcavity: G2 / G1_vcavity(wi, m)            (in [0, 1] for V-cavity G2)
+float sample_reflection(int sampler, int dist, int masking, vector wi, float ax, float ay,
+                        vector key, output vector m)
+{
+    m = vector(0, 0, 1);
+    if (wi[2] <= 0.0)
+        return 0.0;
+    if (max(ax, ay) < MFL_ALPHA_DELTA)
+        return 1.0;  // perfect mirror: G2 = G1 = 1
+    float inv_pdf_factor = sample_reflection_factor(sampler, dist, wi, ax, ay, key, m);
     vector wo = reflect_about(wi, m);
-    if (wo[2] <= 0.0)
+    if (inv_pdf_factor <= 0.0 || wo[2] <= 0.0)
         return 0.0;
     return G2(masking, dist, wi, wo, m, ax, ay) * inv_pdf_factor;
+}
+
+// ---------------------------------------------------------------------------------------
+// The light-sampled split (docs/light-sampling.md; twin: addon/lab/reference/split.py):
+//   f = c(wi) f_ggx + r,   r >= 0,
+// f_ggx Cycles' microfacet("ggx") (height-correlated Smith GGX, F = 1, the model's alphas),
+// which Cycles light-samples, and r the model's own stochastic lobe. c = tint F_lo G_lo is a
+// lower bound of f / f_ggx over every reachable wo, so r is never negative (Cycles drops
+// negative weights): F_lo the least Fresnel factor over the reachable wi.h, G_lo the least
+// ratio G2 / G2_hc (height-correlated 1, separable 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99).
+
+// Below this alpha the lobe is nearly a mirror: stay stochastic (split.ALPHA_SPLIT_MIN).
+#define MFL_ALPHA_SPLIT_MIN 1e-3
+#define MFL_MIN_SEARCH_STEPS 24
+#define MFL_FRESNEL_MARGIN 1e-5
+#define MFL_GOLDEN 0.61803398874989485
+#define MFL_SPLIT_Q_MIN 0.05
+
+// Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
+float reachable_cos_lo(vector wi)
+{
+    return max(cos(0.25 * MFL_PI + 0.5 * acos(clamp(wi[2], -1.0, 1.0))), 0.0);
+}
+
+// cos of the critical angle (0 for eta >= 1): F is a plateau at 1 left of it.
+float critical_cos(float eta) { return sqrt(max(1.0 - eta * eta, 0.0)); }
+
+float fresnel_of(int fresnel_type, float x, float ior, float n, float k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return fresnel_conductor(x, n, k);
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return fresnel_dielectric(x, ior);
+    return 1.0;
+}
+
+// Golden-section minimum of the (unimodal) Fresnel factor over x in [lo, hi]: the least value
+// visited, lowered by the margin (split.fresnel_min, the same steps).
+float fresnel_min(int fresnel_type, float lo, float hi, float ior, float n, float k)
+{
+    float a = lo, b = hi;
+    float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
+    float f1 = fresnel_of(fresnel_type, x1, ior, n, k);
+    float f2 = fresnel_of(fresnel_type, x2, ior, n, k);
+    float best = min(fresnel_of(fresnel_type, a, ior, n, k), fresnel_of(fresnel_type, b, ior, n, k));
+    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
+        best = min(best, min(f1, f2));
+        if (f1 < f2) {  // the minimum lies in [a, x2]
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - MFL_GOLDEN * (b - a);
+            f1 = fresnel_of(fresnel_type, x1, ior, n, k);
+        }
+        else {  // in [x1, b]
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + MFL_GOLDEN * (b - a);
+            f2 = fresnel_of(fresnel_type, x2, ior, n, k);
+        }
+    }
+    return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
+}
+
+// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 F has a (near-)plateau
+// left of the critical angle and a narrow dip right of it, so the two sides are searched apart.
+float conductor_min(float lo, float n, float k)
+{
+    float split_at = max(lo, critical_cos(n));
+    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, 0.0, n, k);
+    if (k <= 0.0)
+        return right;
+    return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, 0.0, n, k));
+}
+
+// c / tint = F_lo G_lo per channel (split.native_factor).
+color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax, float ay,
+                    float ior, color n, color k)
+{
+    float lo = reachable_cos_lo(wi);
+    color F_lo = color(1.0);
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        F_lo = color(conductor_min(lo, n[0], k[0]), conductor_min(lo, n[1], k[1]),
+                     conductor_min(lo, n[2], k[2]));
+    else if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)  // right of the TIR plateau F = 1
+        F_lo = color(fresnel_min(fresnel_type, max(lo, critical_cos(ior)), 1.0, ior, 0.0, 0.0));
+    float G_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
+    return F_lo * G_lo;
+}
+
+// One of the two parts per shading sample, never both: when Cycles samples a singular closure
+// it adds every other closure's value in that direction with the balance heuristic, taking
+// 1e6 for the singular pdf, which biases a sharp native lobe beside a delta residual (gold at
+// roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q ~ the parts'
+// weights (clamped so that neither weight grows more than 20 times) and divided by it: exact.
+closure color split_closures(color w_native, closure color native, color w_residual,
+                             closure color residual, float u)
+{
+    float a = max(w_native[0] + w_native[1] + w_native[2], 0.0);
+    float r = max(w_residual[0] + w_residual[1] + w_residual[2], 0.0);
+    if (r <= 0.0)
+        return w_native * native;
+    if (a <= 0.0)
+        return w_residual * residual;
+    float q = clamp(a / (a + r), MFL_SPLIT_Q_MIN, 1.0 - MFL_SPLIT_Q_MIN);
+    if (u < q)
+        return (w_native / q) * native;
+    return (w_residual / (1.0 - q)) * residual;
 }
