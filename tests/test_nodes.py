@@ -33,8 +33,10 @@ LABELS = {
     "cook_torrance": ["Diffuse Color", "Specular", "Roughness", "Fresnel", "IOR", "N (complex IOR)",
                       "K (extinction)", "Sampler"],
     "walter_reflection": ["Specular Tint", "Roughness", "Anisotropy", "Distribution", "Masking",
-                          "Fresnel", "IOR", "N (complex IOR)", "K (extinction)", "Sampler"],
-    "walter_glass": ["Tint", "Roughness", "IOR", "Distribution", "Masking", "Sampler"],
+                          "Fresnel", "IOR", "N (complex IOR)", "K (extinction)", "Sampler",
+                          "Light Sampling"],
+    "walter_glass": ["Tint", "Roughness", "IOR", "Distribution", "Masking", "Sampler",
+                     "Light Sampling"],
     "lee_vgroove": ["Specular Tint", "Roughness", "Distribution", "Groove", "Fresnel", "IOR",
                     "N (complex IOR)", "K (extinction)", "Max Bounces"],
 }
@@ -44,6 +46,7 @@ ITEM_NAMES = {
     "fresnel_type": ["Conductor", "Dielectric", "None"],
     "sampler": ["D·cos (Walter 2007)", "Visible normals (Heitz 2014)", "V-cavity visible normals"],
     "groove": ["Symmetric", "Asymmetric"],
+    "estimator": ["Native + Residual", "Stochastic"],
 }
 FACTORS = {"roughness", "specular", "anisotropy"}
 VECTORS = {"n", "k"}

@@ -41,14 +41,19 @@ def _rows(etas):
 # moment tables refined themselves around the critical angle (quadrature.tabulate_moments) and
 # the refraction lobe's closure normal stopped being bent by Cycles at eta 3 (osl/microfacet.h,
 # refraction_closure_normal).
+# The GGX rows render with the default Light Sampling (Native + Residual); the last GGX row keeps
+# the pure stochastic estimator, and the separable GGX row splits with the separable bound.
 ROWS = _rows((1.5, 1 / 1.5, 1.0001, 3.0)) + [
-    {"distribution": "beckmann", "masking": "separable", "sampler": "dcos", "ior": 1.5}]
+    {"distribution": "beckmann", "masking": "separable", "sampler": "dcos", "ior": 1.5},
+    {"distribution": "ggx", "masking": "separable", "sampler": "vndf", "ior": 1 / 1.5},
+    {"distribution": "ggx", "masking": "height_correlated", "sampler": "vndf", "ior": 1.5,
+     "estimator": "stochastic"}]
 
 
 def specs_for(rows=ROWS):
     return [SphereSpec("walter_glass", {**row, "roughness": r},
                        f"{row['distribution']} {row['masking']} {row['sampler']} "
-                       f"eta={row['ior']:.4g} r={r}")
+                       f"{row.get('estimator', '')} eta={row['ior']:.4g} r={r}")
             for row in rows for r in ROUGHNESS]
 
 

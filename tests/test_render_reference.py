@@ -41,9 +41,15 @@ for distribution, fresnel in (("ggx", GOLD), ("beckmann", {"fresnel_type": "diel
             ROWS.append(("walter_reflection", {"distribution": distribution, "masking": masking,
                                                "sampler": sampler, **fresnel}))
 
+# GGX rows above render with the default Light Sampling (Native + Residual); the pure stochastic
+# estimator keeps two rows of its own.
+for masking, sampler in (("height_correlated", "vndf"), ("separable", "dcos")):
+    ROWS.append(("walter_reflection", {"distribution": "ggx", "masking": masking,
+                                       "sampler": sampler, "estimator": "stochastic", **GOLD}))
+
 SPECS = [SphereSpec(model, {**values, "roughness": r},
                     f"{model} {values.get('distribution', '')} {values.get('masking', '')} "
-                    f"{values['sampler']} r={r}")
+                    f"{values['sampler']} {values.get('estimator', '')} r={r}")
          for model, values in ROWS for r in ROUGHNESS]
 
 
