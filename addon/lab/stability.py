@@ -70,7 +70,9 @@ def parameter_combos(model_id: str, max_combos: int = MAX_COMBOS, roughness=None
     ids = {p.id for p in model.params}
     axes = []
     for p in model.params:
-        if p.id in ("n", "k", "ior"):
+        # The estimator changes how the shader samples, not the BSDF the numpy twin evaluates
+        # (the split's own twin is tested in tests/test_reference_split.py).
+        if p.id in ("n", "k", "ior", "estimator"):
             continue
         if p.kind == ENUM:
             axes.append((p.id, p.items))
@@ -395,13 +397,13 @@ def osl_models() -> list:
 
 def stress_cases(quick: bool = False, models=None) -> list:
     """(model_id, raw values) for the OSL stress grid: per model and per combination of its
-    sampler and distribution switches, roughness extremes, IOR extremes (at roughness 0 and
+    sampler, distribution and estimator switches, roughness extremes, IOR extremes (at roughness 0 and
     0.3, dielectric Fresnel where there is a switch) and conductor extremes (roughness 0.3)."""
     cases = []
     for model_id in (models if models is not None else list(MODELS)):
         model = MODELS[model_id]
         ids = {p.id for p in model.params}
-        switches = [p for p in model.params if p.id in ("sampler", "distribution")]
+        switches = [p for p in model.params if p.id in ("sampler", "distribution", "estimator")]
         for combo in itertools.product(*(p.items for p in switches)):
             base = dict(zip((p.id for p in switches), combo))
             rough = STRESS_ROUGHNESS[::3] if quick else STRESS_ROUGHNESS

@@ -14,7 +14,7 @@ SUN_ANGLE_DEG = 4.0  # angular diameter
 SUN_STRENGTH = 1.0  # irradiance at normal incidence, W/m^2
 SUN_WORLD = 0.05  # the dim uniform world under the sun
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
-SECTIONS = ("convergence", "samplers", "refcost", "stability", "lee")  # --sections
+SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee")  # --sections
 
 
 @dataclass

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-SAMPLER_STYLE = {"dcos": "--", "vndf": "-", "vcavity": ":", "own": "-", "native": "-"}
+SAMPLER_STYLE = {"dcos": "--", "vndf": "-", "vcavity": ":", "own": "-", "native": "-",
+                 "dcos + native": "-.", "vndf + native": "-."}
 
 
 def _plt():

@@ -10,11 +10,12 @@ from .config import SUN_DIRECTION, SUN_WORLD
 
 def _table_key(spec):
     return (spec.model_id, tuple(sorted((k, str(v)) for k, v in spec.values.items()
-                                        if k != "sampler")))
+                                        if k not in ("sampler", "estimator"))))
 
 
 class ReferenceTables:
-    """Moment tables by (model, values without the sampler), computed once."""
+    """Moment tables by (model, values without the sampler and estimator: the same BSDF),
+    computed once."""
 
     def __init__(self, order: int):
         self.order = order

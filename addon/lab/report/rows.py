@@ -1,4 +1,5 @@
-"""The convergence study's rows: model variants x samplers (catalog driven), and Cycles' native
+"""The convergence study's rows: model variants x samplers x estimators (catalog driven: the
+light-sampled split, "+ native", and the stochastic estimator), and Cycles' native
 closures for the same BSDF; which models have a reference, and whose numpy eval is fast."""
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ class Row:
     model_id: str | None  # None for a native closure
     values: dict
     variant: str  # groups a model variant's samplers with its native closure
-    sampler: str  # sampler item, or "native"
+    sampler: str  # sampler item ("vndf + native" with the light-sampled split), or "native"
     native_kind: str | None = None
 
 
@@ -93,10 +94,15 @@ def build_rows(notes: list) -> list:
         variants = VARIANTS.get(model_id, [(model.label, {}, None)])
         samplers = (model.param("sampler").items
                     if any(p.id == "sampler" for p in model.params) else (None,))
+        estimators = (model.param("estimator").items
+                      if any(p.id == "estimator" for p in model.params) else (None,))
         for label, values, native in variants:
             for s in samplers:
-                v = dict(values, **({"sampler": s} if s else {}))
-                rows.append(Row(f"{label} / {s or 'own'}", label, model_id, v, label, s or "own"))
+                for est in estimators:
+                    v = dict(values, **({"sampler": s} if s else {}),
+                             **({"estimator": est} if est else {}))
+                    name = (s or "own") + (" + native" if est == "light_sampled" else "")
+                    rows.append(Row(f"{label} / {name}", label, model_id, v, label, name))
             if native:
                 rows.append(Row(f"{label} / native", label, None, {}, label, "native", native))
     return rows

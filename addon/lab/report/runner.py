@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import convergence, lee, reference_cost, samplers, stability_section
+from . import convergence, lee, native_share, reference_cost, samplers, stability_section
 from .config import SECTIONS, Progress, config
 from .machine import header_lines, machine_info
 from .page import write_page
@@ -18,7 +18,7 @@ from .references import ReferenceTables
 from .rows import build_rows
 
 # (name in --sections, module): each module's compute() measures and plots, page() writes.
-SECTION_MODULES = (("convergence", convergence), ("samplers", samplers),
+SECTION_MODULES = (("convergence", convergence), ("share", native_share), ("samplers", samplers),
                    ("refcost", reference_cost), ("stability", stability_section), ("lee", lee))
 README_FIGURES = ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png")
 
@@ -59,6 +59,7 @@ def results_json(mode, info, notes, total, res) -> dict:
     sweep, stress, lee_res = res.get("sweep"), res.get("stress") or [], res.get("lee")
     return {"mode": mode, "machine": info, "notes": notes, "seconds": total,
             "time_to_target": res.get("table"), "sun_calibration": res.get("sun_cal"),
+            "native_share": res.get("native_share"),
             "reference_cost": res.get("refcost"), "gpu": res.get("gpu"),
             "convergence": {e: d["series"] for e, d in conv["envs"].items()} if conv else None,
             "sampler_study": {m: {f"{s} r={r}": v for (s, r), v in by_sampler.items()}
