@@ -5,7 +5,9 @@ Lee 2018 rows made from the shipped presets (their roughness swept). Glass is
 rendered as a single interface, as the reference computes it: the refracted ray meets the
 world directly (spheres are invisible to secondary rays). Writes
 out/gallery.png and one EXR per environment, and prints each sphere's error against the numpy
-reference and the render times.
+reference and the render times. Then the look-dev render (addon/lab/lookdev.py): Suzanne on a
+floor under a sky, a sun and an area lamp, every model beside Cycles' closest native material
+at equal time, in out/lookdev.png.
 """
 import argparse
 import sys
@@ -54,6 +56,8 @@ def main(argv=None):
     parser.add_argument("--samples", type=int, default=128)
     parser.add_argument("--cell", type=int, default=64, help="pixels per sphere cell")
     parser.add_argument("--out", default=str(ROOT / "out"))
+    parser.add_argument("--lookdev-seconds", type=float, default=5.0,
+                        help="wall time of each look-dev render (0 leaves the look-dev out)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -80,7 +84,15 @@ def main(argv=None):
             print(f"[demo]   {specs[s.sphere].label:<34} {rel:+13.4%} {noise:10.4%}")
         panels[env_key] = (layout, image, reference, seconds)
     save_gallery(out / "gallery.png", specs, panels)
-    print(f"[demo] wrote {out / 'gallery.png'} in {time.perf_counter() - total:.0f} s total")
+    print(f"[demo] wrote {out / 'gallery.png'}", flush=True)
+    if args.lookdev_seconds > 0:
+        from addon.lab import lookdev
+
+        print(f"[demo] look-dev: Suzanne under a sky, a sun and an area lamp, "
+              f"{args.lookdev_seconds:g} s per image ...", flush=True)
+        lookdev.render_gallery(out / "lookdev.png", args.lookdev_seconds)
+        print(f"[demo] wrote {out / 'lookdev.png'}")
+    print(f"[demo] done in {time.perf_counter() - total:.0f} s total")
 
 
 def to_display(image):

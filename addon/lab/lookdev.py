@@ -1,0 +1,263 @@
+"""The look-dev scene of `make demo`: Suzanne on a floor under a sky, a sun and an area lamp,
+built from nodes and bmesh (no outside assets); each model beside Cycles' closest native
+material, rendered for the same wall time (Cycles' time limit).
+
+Pairs (ours from a shipped preset, native built from Cycles' nodes with the same numbers):
+gold (Walter GGX, conductor) / Metallic BSDF with the same n, k; rough glass (Walter GGX) /
+Glass BSDF; red plastic (Cook-Torrance) / Principled BSDF; rough Lee gold / Metallic BSDF with
+multiscatter GGX (a different model: the closest Cycles has). The Walter pairs also render with
+Light Sampling = Stochastic, the estimator the models had before the split.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..catalog import MODELS
+from . import harness
+
+SUN_ANGLE_DEG = 2.0
+SUN_STRENGTH = 4.0
+SUN_DIRECTION = (-0.45, -0.55, 0.70)  # toward the sun
+AREA_POWER = 400.0  # W
+AREA_SIZE = 1.5
+
+
+def add_sky(scene):
+    """A sky from nodes: zenith blue to a bright horizon (by the direction's z)."""
+    world = harness.compat.new_node_world("Look-dev sky")
+    tree = world.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    sep = tree.nodes.new("ShaderNodeSeparateXYZ")
+    ramp = tree.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].position = 0.0
+    ramp.color_ramp.elements[0].color = (0.55, 0.6, 0.65, 1.0)  # horizon and below
+    ramp.color_ramp.elements[1].position = 0.6
+    ramp.color_ramp.elements[1].color = (0.12, 0.25, 0.6, 1.0)  # zenith
+    background = tree.nodes.new("ShaderNodeBackground")
+    background.inputs["Strength"].default_value = 0.6
+    out = tree.nodes.new("ShaderNodeOutputWorld")
+    tree.links.new(coords.outputs["Generated"], sep.inputs[0])
+    tree.links.new(sep.outputs["Z"], ramp.inputs["Fac"])
+    tree.links.new(ramp.outputs["Color"], background.inputs["Color"])
+    tree.links.new(background.outputs[0], out.inputs["Surface"])
+    scene.world = world
+
+
+def _add_object(scene, name, mesh, location=(0.0, 0.0, 0.0)):
+    import bpy
+
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def add_suzanne(scene, material):
+    """Suzanne, subdivided once and smooth, resting on the floor."""
+    import bmesh
+    import bpy
+
+    bm = bmesh.new()
+    bmesh.ops.create_monkey(bm)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges, cuts=1, use_grid_fill=True, smooth=1.0)
+    for face in bm.faces:
+        face.smooth = True
+    mesh = bpy.data.meshes.new("Suzanne")
+    bm.to_mesh(mesh)
+    bm.free()
+    mesh.materials.append(material)
+    obj = _add_object(scene, "Suzanne", mesh, (0.0, 0.0, 0.75))
+    obj.rotation_euler = (math.radians(-20.0), 0.0, math.radians(25.0))
+    return obj
+
+
+def add_floor(scene):
+    import bpy
+
+    mesh = bpy.data.meshes.new("Floor")
+    s = 20.0
+    mesh.from_pydata([(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [], [(0, 1, 2, 3)])
+    material = bpy.data.materials.new("Floor")
+    material.use_nodes = True
+    bsdf = material.node_tree.nodes.get("Principled BSDF")
+    bsdf.inputs["Base Color"].default_value = (0.35, 0.35, 0.33, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.8
+    mesh.materials.append(material)
+    _add_object(scene, "Floor", mesh)
+
+
+def add_lamps(scene):
+    import bpy
+    import mathutils
+
+    sun = bpy.data.lights.new("Sun", "SUN")
+    sun.energy = SUN_STRENGTH
+    sun.angle = math.radians(SUN_ANGLE_DEG)
+    obj = _add_object(scene, "Sun", sun)
+    obj.rotation_euler = mathutils.Vector(SUN_DIRECTION).to_track_quat("Z", "Y").to_euler()
+    area = bpy.data.lights.new("Area", "AREA")
+    area.energy = AREA_POWER
+    area.size = AREA_SIZE
+    position = mathutils.Vector((2.5, -1.0, 2.5))
+    obj = _add_object(scene, "Area", area, tuple(position))
+    obj.rotation_euler = (-position + mathutils.Vector((0, 0, 0.7))).to_track_quat("-Z", "Y").to_euler()
+
+
+def add_camera(scene, width, height):
+    import bpy
+    import mathutils
+
+    camera = bpy.data.cameras.new("Camera")
+    camera.lens = 50.0
+    position = mathutils.Vector((0.0, -5.2, 1.9))
+    obj = _add_object(scene, "Camera", camera, tuple(position))
+    target = mathutils.Vector((0.0, 0.0, 0.7))
+    obj.rotation_euler = (target - position).to_track_quat("-Z", "Y").to_euler()
+    scene.camera = obj
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+
+
+# --- the materials ---------------------------------------------------------------------------
+
+def native_material(kind: str, values: dict):
+    """Cycles' closest native material for a pair (kind: metallic, glass, principled)."""
+    import bpy
+
+    material = bpy.data.materials.new(f"native {kind}")
+    material.use_nodes = True
+    tree = material.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    if kind in ("metallic", "metallic_multiscatter"):
+        node = tree.nodes.new("ShaderNodeBsdfMetallic")
+        node.fresnel_type = "PHYSICAL_CONDUCTOR"
+        node.distribution = "MULTI_GGX" if kind == "metallic_multiscatter" else "GGX"
+        node.inputs["IOR"].default_value = values["n"]
+        node.inputs["Extinction"].default_value = values["k"]
+    elif kind == "glass":
+        node = tree.nodes.new("ShaderNodeBsdfGlass")
+        node.distribution = "GGX"
+        node.inputs["IOR"].default_value = values["ior"]
+    else:
+        node = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        node.inputs["Base Color"].default_value = tuple(values["base_color"]) + (1.0,)
+        node.inputs["IOR"].default_value = values["ior"]
+        # Cook-Torrance's s F R_s + (1 - s) R_d: Principled scales its specular layer by
+        # Specular IOR Level (0.5 = physical); the closest match to s = 0.3.
+        node.inputs["Specular IOR Level"].default_value = values["specular"]
+    node.inputs["Roughness"].default_value = values["roughness"]
+    tree.links.new(node.outputs[0], out.inputs["Surface"])
+    return material
+
+
+def pairs():
+    """(label, model id, our values, native kind, whether a Stochastic column is rendered)."""
+    from .. import presets
+
+    def preset(pid):
+        p = presets.find(pid)
+        return p.model_id, MODELS[p.model_id].resolve(p.params)
+
+    rows = []
+    for pid, label, kind, stochastic in (
+            ("gold", "Gold: Walter GGX", "metallic", True),
+            ("rough_glass", "Rough glass: Walter GGX", "glass", True),
+            ("red_plastic", "Red plastic: Cook-Torrance", "principled", False),
+            ("rough_gold_lee", "Rough gold: Lee V-grooves", "metallic_multiscatter", False)):
+        model_id, values = preset(pid)
+        rows.append((label, model_id, values, kind, stochastic))
+    return rows
+
+
+def render_view(material, seconds: float, width: int, height: int, seed: int = 0):
+    """One look-dev render of `material` on Suzanne for `seconds` of wall time."""
+    scene = harness.new_scene()
+    # Blender's defaults otherwise (Clamp Indirect 10, Filter Glossy 1, light tree): what an
+    # artist renders with. No denoiser, so the noise shows.
+    cycles = scene.cycles
+    cycles.samples = 1 << 16
+    cycles.time_limit = seconds
+    cycles.use_adaptive_sampling = False
+    cycles.use_denoising = False
+    cycles.seed = seed
+    render = scene.render
+    render.film_transparent = False
+    render.image_settings.file_format = "OPEN_EXR"
+    render.image_settings.color_depth = "32"
+    render.use_file_extension = False
+    add_sky(scene)
+    add_floor(scene)
+    add_lamps(scene)
+    add_camera(scene, width, height)
+    add_suzanne(scene, material() if callable(material) else material)
+    harness.check_compiled()
+    image, wall = harness.render(scene)
+    return np.asarray(image), wall
+
+
+def render_gallery(path, seconds: float = 5.0, width: int = 240, height: int = 180,
+                   progress=print) -> list:
+    """Every pair (and the Stochastic estimator of the Walter models) for `seconds` each;
+    writes a labelled PNG to `path`. Returns one dict per render: label, column, wall time,
+    mean pixel value."""
+    columns = ("ours, default (Native + Residual\nwhere the model has it)", "ours, Stochastic",
+               "Cycles' closest native")
+    grid_images, log = [], []
+    for label, model_id, values, kind, stochastic in pairs():
+        has_menu = any(p.id == "estimator" for p in MODELS[model_id].params)
+        makers = [lambda: harness.model_material(model_id, values, label),
+                  (lambda: harness.model_material(model_id, {**values, "estimator": "stochastic"},
+                                                  label + " stochastic")) if stochastic else None,
+                  lambda: native_material(kind, values)]
+        row = []
+        for column, make in zip(columns, makers):
+            if make is None:
+                row.append(None)
+                continue
+            image, wall = render_view(make, seconds, width, height)
+            name = column.split("\n")[0] if has_menu or column.startswith("Cycles") else "ours"
+            log.append({"label": label, "column": name, "seconds": wall,
+                        "mean": float(np.mean(image[..., :3]))})
+            progress(f"[demo] look-dev {label} / {name}: {wall:.1f} s")
+            row.append(image)
+        grid_images.append(row)
+    save_figure(path, grid_images, columns, seconds)
+    return log
+
+
+def save_figure(path, grid_images, columns, seconds):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = [label for label, *_ in pairs()]
+    rows, cols = len(grid_images), len(columns)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols, 2.35 * rows + 0.6), dpi=110)
+    for r, row in enumerate(grid_images):
+        for c, image in enumerate(row):
+            ax = axes[r, c]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if image is None:
+                ax.set_facecolor("0.92")
+                ax.text(0.5, 0.5, "no Light Sampling menu:\nstochastic only", ha="center",
+                        va="center", transform=ax.transAxes, fontsize=8)
+            else:
+                ax.imshow(np.clip(image[..., :3], 0.0, 1.0) ** (1.0 / 2.2))
+            if r == 0:
+                ax.set_title(columns[c], fontsize=9)
+            if c == 0:
+                ax.set_ylabel(labels[r], fontsize=9)
+    fig.suptitle(f"Look-dev: sky, a {SUN_ANGLE_DEG:g} degree sun and an area lamp; every image "
+                 f"rendered for {seconds:g} s (Blender's default clamps, no denoiser)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
