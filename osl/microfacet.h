@@ -399,10 +399,10 @@ float sample_reflection(int sampler, int dist, int masking, vector wi, float ax,
 
 // Below this alpha the lobe is nearly a mirror: stay stochastic (split.ALPHA_SPLIT_MIN).
 #define MFL_ALPHA_SPLIT_MIN 1e-3
-#define MFL_MIN_SEARCH_STEPS 24
-#define MFL_FRESNEL_MARGIN 1e-5
+#define MFL_MIN_SEARCH_STEPS 16
+#define MFL_FRESNEL_MARGIN 1e-4
+#define MFL_CUSP_K 1.0
 #define MFL_GOLDEN 0.61803398874989485
-#define MFL_SPLIT_Q_MIN 0.05
 
 // Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
 float reachable_cos_lo(vector wi)
@@ -422,15 +422,27 @@ float fresnel_of(int fresnel_type, float x, float ior, float n, float k)
     return 1.0;
 }
 
-// Golden-section minimum of the (unimodal) Fresnel factor over x in [lo, hi]: the least value
-// visited, lowered by the margin (split.fresnel_min, the same steps).
-float fresnel_min(int fresnel_type, float lo, float hi, float ior, float n, float k)
+// x = origin + sign t^2, clamped to [lo, hi]: the search variable of fresnel_min.
+float fresnel_at(int fresnel_type, float t, float origin, float sign, float lo, float hi,
+                 float ior, float n, float k)
 {
-    float a = lo, b = hi;
+    return fresnel_of(fresnel_type, clamp(origin + sign * t * t, lo, hi), ior, n, k);
+}
+
+// Golden-section minimum of the (unimodal) Fresnel factor over x in [lo, hi], searched in
+// t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
+// F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
+// (split.fresnel_min, the same steps).
+float fresnel_min(int fresnel_type, float lo, float hi, float origin, float ior, float n, float k)
+{
+    float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
+    float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
+    float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
     float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
-    float f1 = fresnel_of(fresnel_type, x1, ior, n, k);
-    float f2 = fresnel_of(fresnel_type, x2, ior, n, k);
-    float best = min(fresnel_of(fresnel_type, a, ior, n, k), fresnel_of(fresnel_type, b, ior, n, k));
+    float f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
+    float f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
+    float best = min(fresnel_at(fresnel_type, a, origin, sign, lo, hi, ior, n, k),
+                     fresnel_at(fresnel_type, b, origin, sign, lo, hi, ior, n, k));
     for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
         best = min(best, min(f1, f2));
         if (f1 < f2) {  // the minimum lies in [a, x2]
@@ -438,28 +450,30 @@ float fresnel_min(int fresnel_type, float lo, float hi, float ior, float n, floa
             x2 = x1;
             f2 = f1;
             x1 = b - MFL_GOLDEN * (b - a);
-            f1 = fresnel_of(fresnel_type, x1, ior, n, k);
+            f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
         }
         else {  // in [x1, b]
             a = x1;
             x1 = x2;
             f1 = f2;
             x2 = a + MFL_GOLDEN * (b - a);
-            f2 = fresnel_of(fresnel_type, x2, ior, n, k);
+            f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
         }
     }
     return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
 }
 
-// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 F has a (near-)plateau
-// left of the critical angle and a narrow dip right of it, so the two sides are searched apart.
+// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
+// has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
+// two sides are searched apart; otherwise one search covers [lo, 1].
 float conductor_min(float lo, float n, float k)
 {
-    float split_at = max(lo, critical_cos(n));
-    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, 0.0, n, k);
-    if (k <= 0.0)
+    float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
+    float split_at = max(lo, xc);
+    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, xc, 0.0, n, k);
+    if (k <= 0.0 || xc <= lo)
         return right;
-    return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, 0.0, n, k));
+    return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, xc, 0.0, n, k));
 }
 
 // c / tint = F_lo G_lo per channel (split.native_factor).
@@ -472,7 +486,8 @@ color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax
         F_lo = color(conductor_min(lo, n[0], k[0]), conductor_min(lo, n[1], k[1]),
                      conductor_min(lo, n[2], k[2]));
     else if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)  // right of the TIR plateau F = 1
-        F_lo = color(fresnel_min(fresnel_type, max(lo, critical_cos(ior)), 1.0, ior, 0.0, 0.0));
+        F_lo = color(fresnel_min(fresnel_type, max(lo, critical_cos(ior)), 1.0, critical_cos(ior),
+                                 ior, 0.0, 0.0));
     float G_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
     return F_lo * G_lo;
 }
@@ -480,8 +495,9 @@ color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax
 // One of the two parts per shading sample, never both: when Cycles samples a singular closure
 // it adds every other closure's value in that direction with the balance heuristic, taking
 // 1e6 for the singular pdf, which biases a sharp native lobe beside a delta residual (gold at
-// roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q ~ the parts'
-// weights (clamped so that neither weight grows more than 20 times) and divided by it: exact.
+// roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q = a / (a + r),
+// a and r the channel sums of the two weights, and divided by it: exact, and both choices then
+// carry the same total weight a + r, so the choice itself adds noise only through colour.
 closure color split_closures(color w_native, closure color native, color w_residual,
                              closure color residual, float u)
 {
@@ -491,7 +507,7 @@ closure color split_closures(color w_native, closure color native, color w_resid
         return w_native * native;
     if (a <= 0.0)
         return w_residual * residual;
-    float q = clamp(a / (a + r), MFL_SPLIT_Q_MIN, 1.0 - MFL_SPLIT_Q_MIN);
+    float q = a / (a + r);
     if (u < q)
         return (w_native / q) * native;
     return (w_residual / (1.0 - q)) * residual;

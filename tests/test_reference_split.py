@@ -35,22 +35,23 @@ def test_conductor_fresnel_minimum_is_a_tight_lower_bound(lo):
     n, k = n.ravel(), k.ravel()
     found = split.conductor_min(n, k, np.full(n.shape, float(lo)))
     dense = _dense_min(lambda x: fresnel_conductor(x[:, None], n, k), lo)
-    assert np.all(found <= dense), (n[found > dense], k[found > dense])
+    assert np.all(found <= dense + 1e-15), (n[found > dense], k[found > dense])
     # Tight (within the margin) where the grid resolves the dip right of the critical angle
     # (for n << 1 it is narrower than the grid; the search is not).
     resolved = (n >= 1.0) | (1.0 - split.critical_cos(n) > 0.05)
-    assert np.all((found >= dense * (1.0 - 1e-4))[resolved])  # grid spacing 5e-5 in x
+    assert np.all((found >= dense * (1.0 - 3e-4))[resolved])  # margin 1e-4, grid 5e-5 in x
 
 
 @pytest.mark.parametrize("lo", LOS)
 def test_dielectric_fresnel_minimum_on_both_sides_of_the_interface(lo):
     eta = np.exp(np.linspace(np.log(0.01), np.log(100.0), 401))
     lo_v = np.maximum(lo, split.critical_cos(eta))
-    found = split.fresnel_min(lambda x: fresnel_dielectric(x, eta), lo_v[None, :] * 1.0)[0]
+    xc = split.critical_cos(eta)[None, :] * 1.0
+    found = split.fresnel_min(lambda x: fresnel_dielectric(x, eta), lo_v[None, :] * 1.0, 1.0, xc)[0]
     dense = _dense_min(lambda x: fresnel_dielectric(x[:, None], eta), lo)
     assert np.all(found <= dense + 1e-15)  # eta = 1 + 1e-15 reflects 1e-31: rounding only
     resolved = (eta >= 1.0) | (1.0 - split.critical_cos(eta) > 0.05)
-    assert np.all((found >= dense * (1.0 - 1e-4))[resolved])
+    assert np.all((found >= dense * (1.0 - 3e-4))[resolved])
     # Inside a dense medium the minimum is not F(1) (the dip by Brewster's angle).
     assert np.any(dense < fresnel_dielectric(1.0, eta) * (1 - 1e-3))
 
@@ -149,8 +150,8 @@ def test_osl_constants_match_the_twin():
     assert define("MFL_ALPHA_SPLIT_MIN") == split.ALPHA_SPLIT_MIN
     assert define("MFL_MIN_SEARCH_STEPS") == split.MIN_SEARCH_STEPS
     assert define("MFL_FRESNEL_MARGIN") == split.FRESNEL_MARGIN
+    assert define("MFL_CUSP_K") == split.CUSP_K
     assert abs(define("MFL_GOLDEN") - split._GOLDEN) < 1e-15
-    assert define("MFL_SPLIT_Q_MIN") == split.SPLIT_Q_MIN
 
 
 def test_one_part_per_sample_keeps_the_sum():
@@ -160,6 +161,9 @@ def test_one_part_per_sample_keeps_the_sum():
     w_r = rng.random((1000, 3)) * rng.choice([0, 1, 1e-3], (1000, 1))
     q = split.selection_probability(w_n, w_r)
     assert np.all((q >= 0) & (q <= 1))
+    # Both choices carry the same total weight: the choice adds noise only through colour.
+    both = (w_n.sum(1) > 0) & (w_r.sum(1) > 0)
+    assert np.allclose(w_n.sum(1)[both] / q[both], w_r.sum(1)[both] / (1 - q[both]))
     expected = q[:, None] * np.where(q[:, None] > 0, w_n / np.maximum(q, 1e-300)[:, None], 0) + \
         (1 - q)[:, None] * np.where(q[:, None] < 1, w_r / np.maximum(1 - q, 1e-300)[:, None], 0)
     assert np.allclose(expected, w_n + w_r)

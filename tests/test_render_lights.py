@@ -68,17 +68,9 @@ def add_occluder(scene, row: int):
     """A black quad over `row`, visible to every ray but the camera's."""
     x0, x1, y0, y1 = occluder_rectangle(row)
     z = OCCLUDER_HEIGHT
-    mesh = bpy.data.meshes.new("occluder")
-    mesh.from_pydata([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)], [], [(0, 1, 2, 3)])
-    material = bpy.data.materials.new("black")
-    material.use_nodes = True
-    bsdf = material.node_tree.nodes.get("Principled BSDF")
-    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bsdf.inputs["Specular IOR Level"].default_value = 0.0
-    mesh.materials.append(material)
-    obj = bpy.data.objects.new("occluder", mesh)
+    corners = [(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]
+    obj = harness.add_quad(scene, "occluder", corners, (0.0, 0.0, 0.0), specular=0.0)
     obj.visible_camera = False
-    scene.collection.objects.link(obj)
 
 
 def _hits_occluder(points, dirs, rect):

@@ -165,6 +165,21 @@ def _new_material(name: str):
     return material, tree, output
 
 
+def add_quad(scene, name: str, corners, base_color, roughness=0.5, specular=0.5):
+    """A one-face mesh object with a plain Principled material (floors, occluders)."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(c) for c in corners], [], [(0, 1, 2, 3)])
+    material = compat.new_node_material(name)
+    bsdf = material.node_tree.nodes.get("Principled BSDF")
+    bsdf.inputs["Base Color"].default_value = tuple(base_color) + (1.0,)
+    bsdf.inputs["Roughness"].default_value = roughness
+    bsdf.inputs["Specular IOR Level"].default_value = specular
+    mesh.materials.append(material)
+    obj = bpy.data.objects.new(name, mesh)
+    scene.collection.objects.link(obj)
+    return obj
+
+
 def model_material(model_id: str, values: dict | None = None, name: str | None = None):
     """A material made of one Microfacet Lab node group."""
     material, tree, output = _new_material(name or model_id)

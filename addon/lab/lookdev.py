@@ -76,18 +76,9 @@ def add_suzanne(scene, material):
 
 
 def add_floor(scene):
-    import bpy
-
-    mesh = bpy.data.meshes.new("Floor")
     s = 20.0
-    mesh.from_pydata([(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [], [(0, 1, 2, 3)])
-    material = bpy.data.materials.new("Floor")
-    material.use_nodes = True
-    bsdf = material.node_tree.nodes.get("Principled BSDF")
-    bsdf.inputs["Base Color"].default_value = (0.35, 0.35, 0.33, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.8
-    mesh.materials.append(material)
-    _add_object(scene, "Floor", mesh)
+    harness.add_quad(scene, "Floor", [(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)],
+                     (0.35, 0.35, 0.33), roughness=0.8)
 
 
 def add_lamps(scene):

@@ -26,8 +26,9 @@ Beckmann has no such bound (its tail falls faster than GGX's), so it stays stoch
 The shader returns one of the two parts per sample, never both (`split_closures` in
 microfacet.h, `selection_probability` here): when Cycles samples a singular closure it adds the
 other closures' values in that direction with the balance heuristic and a singular pdf of 1e6,
-which biases a sharp native lobe beside a delta residual. Choosing the part with probability q
-and dividing by q keeps the sum exact.
+which biases a sharp native lobe beside a delta residual. Choosing the part with probability
+q = a / (a + r) (a, r the channel sums of the two weights) and dividing by q keeps the sum
+exact, and gives both choices the same total weight.
 
 Glass splits its reflection lobe the same way (the transmission stays stochastic): the lobe is
 chosen with probability F, so the residual's reflection weight is G2 - (c / F) G2_hc per unit
@@ -48,14 +49,17 @@ ESTIMATORS = ("light_sampled", "stochastic")
 # Below this alpha (roughness 0.032) the lobe is nearly a mirror: Cycles' near-specular GGX and
 # our delta lobe would meet in a region nobody can light-sample; stay stochastic.
 ALPHA_SPLIT_MIN = 1e-3
-# Golden-section steps for the conductor's Fresnel minimum: the bracket shrinks to
-# 0.618^24 = 1e-5 of [cos_lo, 1], so the value found exceeds the true minimum by ~F'' 1e-11.
-MIN_SEARCH_STEPS = 24
+# Golden-section steps for the Fresnel minimum: the bracket shrinks to 0.618^16 = 4.6e-4 of
+# the searched interval, so the value found exceeds the true minimum by ~F'' 3e-8 (F'' the
+# curvature over that interval). Each step is one Fresnel evaluation per channel and side, the
+# split's main cost per shading point (24 steps made the split twice as costly as native GGX).
+MIN_SEARCH_STEPS = 16
+# Below this extinction a conductor with n < 1 has a cusp at its critical angle (see
+# conductor_min); above it F is smooth there (tests/test_reference_split.py checks both).
+CUSP_K = 1.0
 # Relative margin under the minimum found: covers the search and float32 rounding in OSL.
-FRESNEL_MARGIN = 1e-5
+FRESNEL_MARGIN = 1e-4
 _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
-# Neither part is chosen with a probability below this (its weight grows at most 20 times).
-SPLIT_Q_MIN = 0.05
 
 
 def reachable_cos_lo(wi):
@@ -65,19 +69,31 @@ def reachable_cos_lo(wi):
     return np.maximum(np.cos(0.25 * math.pi + 0.5 * theta), 0.0)
 
 
-def fresnel_min(F, lo, hi=1.0, steps: int = MIN_SEARCH_STEPS):
-    """min of a unimodal F(x) over x in [lo, hi], by golden section (the OSL twin runs the same
-    steps): the smallest value visited, times (1 - FRESNEL_MARGIN). lo (..., 3), F(x) (..., 3)."""
-    a, b = lo, np.broadcast_to(hi, np.shape(lo)) * 1.0
+def fresnel_min(F, lo, hi=1.0, origin=None, steps: int = MIN_SEARCH_STEPS):
+    """min of a unimodal F(x) over x in [lo, hi], by golden section in t = sqrt(|x - origin|)
+    (the OSL twin runs the same steps): the smallest value visited, times
+    (1 - FRESNEL_MARGIN). `origin` is the critical angle's cosine at one end of the interval
+    (default lo), where F has a square-root cusp that t makes smooth. lo, hi, origin (..., 3)."""
+    lo = np.asarray(lo, dtype=float)
+    hi = np.broadcast_to(hi, lo.shape) * 1.0
+    origin = lo if origin is None else np.broadcast_to(origin, lo.shape) * 1.0
+    # x = origin + sign t^2, t from a to b: sign +1 when origin is the lower end, else -1.
+    sign = np.where(np.abs(hi - origin) >= np.abs(lo - origin), 1.0, -1.0)
+
+    def G(t):
+        return F(np.clip(origin + sign * t * t, lo, hi))
+
+    a = np.sqrt(np.abs(np.where(sign > 0, lo, hi) - origin))
+    b = np.sqrt(np.abs(np.where(sign > 0, hi, lo) - origin))
     x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
-    f1, f2 = F(x1), F(x2)
-    best = np.minimum(F(a), F(b))
+    f1, f2 = G(x1), G(x2)
+    best = np.minimum(G(a), G(b))
     for _ in range(steps):
         best = np.minimum(best, np.minimum(f1, f2))
         left = f1 < f2  # the minimum lies in [a, x2], else in [x1, b]
         a, b = np.where(left, a, x1), np.where(left, x2, b)
         xn = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
-        fn = F(xn)
+        fn = G(xn)
         x1, f1, x2, f2 = (np.where(left, xn, x2), np.where(left, fn, f2),
                           np.where(left, x1, xn), np.where(left, f1, fn))
     best = np.minimum(best, np.minimum(f1, f2))
@@ -99,24 +115,28 @@ def fresnel_lower_bound(bsdf, wi):
         # Monotone for eta > 1; inside a denser medium (eta < 1) it dips near Brewster's angle,
         # right of the total-internal-reflection plateau F = 1.
         eta = bsdf.eta if isinstance(bsdf, MicrofacetGlass) else bsdf.ior
-        return fresnel_min(lambda x: fresnel_dielectric(x, eta), np.maximum(lo, critical_cos(eta)))
+        xc = critical_cos(eta) * np.ones_like(lo)
+        return fresnel_min(lambda x: fresnel_dielectric(x, eta), np.maximum(lo, xc), 1.0, xc)
     if bsdf.fresnel == "conductor":
         return conductor_min(bsdf.n, bsdf.k, lo)
     return np.ones_like(lo)
 
 
 def conductor_min(n, k, lo):
-    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption F has
-    a near-plateau left of the critical angle and a dip just right of it, as narrow as 1e-6 in
-    wi.h: search the two sides of the critical angle separately (k = 0: the plateau is 1)."""
-    xc = np.broadcast_to(critical_cos(n), np.shape(lo))
+    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption
+    (k < CUSP_K) F has a near-plateau left of the critical angle and a cusp and dip right of
+    it, as narrow as 1e-6 in wi.h: the two sides are searched separately (k = 0: the plateau is
+    1). Otherwise F is smooth and one search covers [lo, 1]."""
+    n = np.asarray(n, dtype=float)
+    k = np.asarray(k, dtype=float)
+    xc = np.broadcast_to(np.where(k < CUSP_K, critical_cos(n), 0.0), np.shape(lo))
     split_at = np.maximum(lo, xc)
 
     def F(x):
         return fresnel_conductor(x, n, k)
 
-    right = fresnel_min(F, split_at)
-    left = np.where(np.asarray(k) > 0.0, fresnel_min(F, lo, split_at), 1.0)
+    right = fresnel_min(F, split_at, 1.0, xc)
+    left = np.where((k > 0.0) & (xc > lo), fresnel_min(F, lo, split_at, xc), 1.0)
     return np.minimum(left, right)
 
 
@@ -227,9 +247,9 @@ def albedo_share(bsdf, wi, n: int = 1 << 16, seed: int = 0):
 
 def selection_probability(w_native, w_residual):
     """q, the probability of returning the native part rather than the residual (the OSL's
-    split_closures): proportional to the channel sums of their weights, clamped to
-    [SPLIT_Q_MIN, 1 - SPLIT_Q_MIN] when both are non-zero; 1 or 0 when one of them is zero."""
+    split_closures): a / (a + r), a and r the channel sums of their weights; 1 or 0 when one
+    of them is zero. Both choices then carry the total weight a + r."""
     a = np.maximum(np.sum(w_native, axis=-1), 0.0)
     r = np.maximum(np.sum(w_residual, axis=-1), 0.0)
-    q = np.clip(a / np.where(a + r > 0, a + r, 1.0), SPLIT_Q_MIN, 1.0 - SPLIT_Q_MIN)
+    q = a / np.where(a + r > 0, a + r, 1.0)
     return np.where(r <= 0.0, 1.0, np.where(a <= 0.0, 0.0, q))

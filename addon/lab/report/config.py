@@ -13,6 +13,12 @@ SUN_DIRECTION = (0.6, 0.48, 0.64)  # toward the sun, world space (same as the gr
 SUN_ANGLE_DEG = 4.0  # angular diameter
 SUN_STRENGTH = 1.0  # irradiance at normal incidence, W/m^2
 SUN_WORLD = 0.05  # the dim uniform world under the sun
+# Lights that are a uniform cone over the dim world, by environment key: (kind, angular
+# diameter in degrees). "lamp": a Cycles sun lamp (radiance calibrated on a mirror sphere);
+# "world": a bright spot painted into the world shader, no lamp (radiance exact, SPOT_STRENGTH
+# of irradiance at normal incidence), found by Cycles' world importance sampling.
+CONE_LIGHTS = {"sun": ("lamp", SUN_ANGLE_DEG), "sun05": ("lamp", 0.5), "spot": ("world", 4.0)}
+SPOT_STRENGTH = 1.0
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee")  # --sections
 
@@ -65,11 +71,12 @@ def config(mode: str) -> Config:
     theta_full = tuple(np.round(np.concatenate([np.linspace(0, 80, 9), [84, 87, 88.5, 89.5, 89.9]]), 3))
     if mode == "full":
         return Config("full", tuple(2 ** k for k in range(11)), 20, (0.1, 0.3, 0.6, 1.0),
-                      ("white", "gradient", "sun"), 1, 1024, "full", 40000, theta_full,
+                      ("white", "gradient", "sun", "sun05", "spot"), 1, 1024, "full", 40000,
+                      theta_full,
                       (0.1, 0.3, 0.6, 1.0), 96, (2, 3, 4, 6, 8), 14, 32, (24, 48))
     if mode == "quick":
         return Config("quick", (1, 4, 16, 64, 256), 16, (0.1, 0.3, 0.6, 1.0),
-                      ("white", "gradient", "sun"), 8, 256, "quick", 8000,
+                      ("white", "gradient", "sun", "sun05", "spot"), 8, 256, "quick", 8000,
                       (0.0, 30.0, 60.0, 80.0, 87.0, 89.0, 89.9), (0.1, 0.3, 1.0), 64,
                       (2, 4, 6), 10, 16, (16, 32), combo_seconds=5.0, model_seconds=30.0,
                       lee=LeeConfig(furnace_samples=64, furnace_px=32, cost_samples=(16, 256),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import grid
-from .config import SUN_DIRECTION, SUN_WORLD
+from .config import CONE_LIGHTS, SUN_DIRECTION, SUN_WORLD
 
 
 def _table_key(spec):
@@ -99,12 +99,12 @@ def sun_term(layout, specs, radiance: float, half_angle: float, nodes: tuple) ->
 
 
 def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, nodes=(24, 48)):
-    """The reference of a grid under 'white', 'gradient' or 'sun' (then `sun` = (radiance,
-    half_angle)); returns (image, sun-quadrature error estimate or 0)."""
+    """The reference of a grid under 'white', 'gradient' or a cone light of CONE_LIGHTS (then
+    `sun` = (radiance, half_angle)); returns (image, sun-quadrature error estimate or 0)."""
     from ..reference.quadrature import moments_at
 
     tabs = [None if s is None else tables.get(s) for s in specs]
-    if env_key != "sun":
+    if env_key not in CONE_LIGHTS:
         return grid.reference_image(layout, tabs, grid.ENVIRONMENTS[env_key], moments_at), 0.0
     world = grid.Environment("sun world", SUN_WORLD)
     base = grid.reference_image(layout, tabs, world, moments_at)

@@ -8,7 +8,7 @@ import numpy as np
 
 from .. import grid
 from ..native import native_source
-from .config import SUN_ANGLE_DEG, SUN_STRENGTH, SUN_WORLD
+from .config import CONE_LIGHTS, SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_STRENGTH, SUN_WORLD
 from .references import sun_unit
 
 
@@ -28,6 +28,40 @@ def add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG):
 
 def env_for(env_key):
     return grid.ENVIRONMENTS.get(env_key) or grid.Environment("sun over a dim world", SUN_WORLD)
+
+
+def cone_radiance(env_key, sun_cal) -> tuple:
+    """(radiance, half-angle) of a cone light: a lamp's from the 4-degree sun's calibration
+    (the measured over the formula's radiance, the same factor at every angle), the world
+    spot's exactly."""
+    kind, angle = CONE_LIGHTS[env_key]
+    half = math.radians(angle) / 2.0
+    formula = 1.0 / (2.0 * math.pi * (1.0 - math.cos(half)))
+    if kind == "world":
+        return SPOT_STRENGTH * formula, half
+    return SUN_STRENGTH * formula * sun_cal["radiance"] / sun_cal["formula"], half
+
+
+def add_spot_world(scene, radiance: float, half: float):
+    """Add a uniform disk of `radiance` around sun_unit() to the scene's world (dim uniform
+    SUN_WORLD elsewhere): world light only, no lamp."""
+    tree = scene.world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    dot = tree.nodes.new("ShaderNodeVectorMath")
+    dot.operation = "DOT_PRODUCT"
+    dot.inputs[1].default_value = tuple(sun_unit())
+    inside = tree.nodes.new("ShaderNodeMath")
+    inside.operation = "GREATER_THAN"
+    inside.inputs[1].default_value = math.cos(half)
+    level = tree.nodes.new("ShaderNodeMath")
+    level.operation = "MULTIPLY_ADD"
+    level.inputs[1].default_value = radiance
+    level.inputs[2].default_value = SUN_WORLD
+    tree.links.new(coords.outputs["Generated"], dot.inputs[0])
+    tree.links.new(dot.outputs["Value"], inside.inputs[0])
+    tree.links.new(inside.outputs["Value"], level.inputs[0])
+    tree.links.new(level.outputs["Value"], background.inputs["Color"])
 
 
 def calibrate_sun(progress) -> dict:
@@ -70,7 +104,7 @@ def set_border(scene, layout, row):
     r.border_min_y = 1.0 - (row + 1) / layout.rows
 
 
-def build_env_scene(rows, cfg, env_key, device="CPU"):
+def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
     """One scene per environment: row r of the grid is rows[r], one sphere per roughness."""
     from .. import harness
 
@@ -86,8 +120,10 @@ def build_env_scene(rows, cfg, env_key, device="CPU"):
                 mats.append(harness.model_material(row.model_id, {**row.values, "roughness": r},
                                                    name))
     harness.build_grid_scene(layout, mats, env_for(env_key), 1, cfg.seed)
-    if env_key == "sun":
-        add_sun(scene)
+    if env_key in CONE_LIGHTS and CONE_LIGHTS[env_key][0] == "lamp":
+        add_sun(scene, angle_deg=CONE_LIGHTS[env_key][1])
+    elif env_key in CONE_LIGHTS:
+        add_spot_world(scene, *cone_radiance(env_key, sun_cal))
     if device != "CPU":
         set_gpu(scene, device)
     scene.render.use_persistent_data = True
