@@ -18,7 +18,7 @@ import numpy as np
 
 from ...catalog import MODELS, alphas
 from .fresnel import fresnel_conductor, fresnel_dielectric
-from .microfacet import Microfacet, dot, normalize, reflect
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
 _TINY = 1e-30
 
@@ -101,6 +101,21 @@ class MicrofacetBRDF:
         m = mf.sample_vcavity(wi, u1, u2, u3)
         return m, mf.pdf_vcavity(wi, m)
 
+    def inv_pdf_factor(self, wi, m):
+        """The sampler's part of the sample weight, f cos / (F G2 tint pdf), for the normal m
+        it drew (the closed forms listed in `sample`; OSL: sample_reflection_factor)."""
+        wz = wi[..., 2]
+        c = dot(wi, m)
+        safe_wz = np.where(wz > 0.0, wz, 1.0)
+        safe_mz = np.maximum(m[..., 2], _TINY)
+        if self.sampler == "dcos":
+            return np.abs(c) / (safe_wz * safe_mz)
+        if self.sampler == "vndf":
+            g1 = self.mf.G1(wi, m)
+            return np.where(g1 > 0.0, 1.0 / np.where(g1 > 0.0, g1, 1.0), 0.0)
+        cm = np.maximum(dot(wi, m * np.array([-1.0, -1.0, 1.0])), 0.0)
+        return (np.maximum(c, 0.0) + cm) / (2.0 * safe_wz * safe_mz)
+
     def sample(self, wi, u):
         """Sample the specular lobe: returns (wo, weight, pdf), weight = f_s cos / pdf (RGB),
         pdf over solid angle of wo = pdf_m / (4 |wi.m|) (Walter 2007 eq. 14, Jacobian of the
@@ -110,11 +125,7 @@ class MicrofacetBRDF:
         vcavity (Heitz 2014 sec. 6):       F G2 (<wi,m>+ + <wi,m'>+) / (2 wi.n m.n)
                                            = F G2 / G1_vcavity(wi, m)
         all times the tint; 0 where wo.n <= 0 (or wi.n <= 0)."""
-        wi = np.asarray(wi, dtype=float)
-        u = np.asarray(u, dtype=float)
-        shape = np.broadcast_shapes(wi.shape, u.shape)
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape)
+        wi, u = broadcast_pair(wi, u)
         wz = wi[..., 2]
         if self.is_delta:
             wo = wi * np.array([-1.0, -1.0, 1.0])
@@ -123,17 +134,7 @@ class MicrofacetBRDF:
         wo = reflect(wi, m)
         c = dot(wi, m)
         pdf = pdf_m / (4.0 * np.maximum(np.abs(c), _TINY))
-        G2 = self.mf.G2(wi, wo, m, self.masking)
-        safe_wz = np.where(wz > 0.0, wz, 1.0)
-        safe_mz = np.maximum(m[..., 2], _TINY)
-        if self.sampler == "dcos":
-            w = G2 * np.abs(c) / (safe_wz * safe_mz)
-        elif self.sampler == "vndf":
-            g1 = self.mf.G1(wi, m)
-            w = np.where(g1 > 0.0, G2 / np.where(g1 > 0.0, g1, 1.0), 0.0)
-        else:
-            cm = np.maximum(dot(wi, m * np.array([-1.0, -1.0, 1.0])), 0.0)
-            w = G2 * (np.maximum(c, 0.0) + cm) / (2.0 * safe_wz * safe_mz)
+        w = self.mf.G2(wi, wo, m, self.masking) * self.inv_pdf_factor(wi, m)
         valid = (wz > 0.0) & (wo[..., 2] > 0.0) & (c > 0.0) & (pdf_m > 0.0)
         weight = np.where(valid[..., None], self.tint * self.F(c) * w[..., None], 0.0)
         return wo, weight, np.where(wz > 0.0, pdf, 0.0)

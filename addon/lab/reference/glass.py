@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from .fresnel import fresnel_dielectric
-from .microfacet import Microfacet, dot, normalize, reflect
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
 _TINY = 1e-30
 PASS_THROUGH_EPS = 1e-5  # |eta - 1| below this is index matched (as the OSL shader)
@@ -221,11 +221,8 @@ class MicrofacetGlass:
     def sample(self, wi, u):
         """One sample as osl/walter_glass.osl: returns (wo, weight, pdf); weight =
         eval_cos / pdf = tint G2 factor (RGB). Zero-weight samples have pdf 0."""
-        wi = np.asarray(wi, dtype=float)
-        u = np.asarray(u, dtype=float)
-        shape = np.broadcast_shapes(wi.shape, u.shape)
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape)
+        wi, u = broadcast_pair(wi, u)
+        shape = wi.shape
         wz = wi[..., 2]
         up = wz > 0.0
         eta = self.eta

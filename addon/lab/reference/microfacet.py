@@ -41,6 +41,14 @@ def normalize(v):
     return v / np.maximum(length, _TINY)[..., None]
 
 
+def broadcast_pair(wi, u):
+    """wi and u as float arrays broadcast to one shape (the samplers' inputs)."""
+    wi = np.asarray(wi, dtype=float)
+    u = np.asarray(u, dtype=float)
+    shape = np.broadcast_shapes(wi.shape, u.shape)
+    return np.broadcast_to(wi, shape), np.broadcast_to(u, shape)
+
+
 def reflect(w, m):
     """Mirror w about m (both pointing away from the surface): 2 (w.m) m - w."""
     return 2.0 * dot(w, m)[..., None] * m - w

@@ -43,7 +43,7 @@ import numpy as np
 from .bsdf import MicrofacetBRDF
 from .fresnel import fresnel_conductor, fresnel_dielectric
 from .glass import MicrofacetGlass
-from .microfacet import Microfacet, dot, normalize, reflect
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
 ESTIMATORS = ("light_sampled", "stochastic")
 # Below this alpha (roughness 0.032) the lobe is nearly a mirror: Cycles' near-specular GGX and
@@ -207,19 +207,11 @@ def residual_weight_reflection(bsdf, wi, wo, m, inv_pdf_factor):
 def sample_residual(bsdf, wi, u):
     """One sample of the residual lobe of a reflection BSDF: (wo, weight), weight =
     r cos / pdf with the model's own sampler (its visible-normal or D cos density)."""
-    wi = np.asarray(wi, dtype=float)
-    u = np.asarray(u, dtype=float)
-    shape = np.broadcast_shapes(wi.shape, u.shape)
-    wi, u = np.broadcast_to(wi, shape), np.broadcast_to(u, shape)
+    wi, u = broadcast_pair(wi, u)
     m, _ = bsdf.sample_normal(wi, u)
     wo = reflect(wi, m)
     c = dot(wi, m)
-    mf = bsdf.mf
-    if bsdf.sampler == "dcos":
-        inv = np.abs(c) / (np.where(wi[..., 2] > 0, wi[..., 2], 1.0) * np.maximum(m[..., 2], 1e-30))
-    else:
-        g1 = mf.G1(wi, m)
-        inv = np.where(g1 > 0.0, 1.0 / np.where(g1 > 0.0, g1, 1.0), 0.0)
+    inv = bsdf.inv_pdf_factor(wi, m)
     valid = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0) & (c > 0.0)
     w = residual_weight_reflection(bsdf, wi, wo, m, np.where(valid, inv, 0.0))
     return wo, np.where(valid[..., None], w, 0.0)
