@@ -1,5 +1,5 @@
 """Microfacet Lab add-on: the package the extension ships (catalog, shader assembly, node groups,
-presets, UI and operators, scene specialization).
+presets, UI and operators, scene specialization, the lamps' hand-over).
 
 `lab/` beside these modules is the verification lab (numpy reference, sphere-grid harness,
 report, stability sweep, benchmarks). It is left out of the built extension (the manifest's
@@ -11,12 +11,14 @@ alone); `register()` imports the bpy-side modules.
 
 
 def register():
-    from . import preset_ui, ui
+    from . import handover, preset_ui, ui
     ui.register()
     preset_ui.register()
+    handover.register()
 
 
 def unregister():
-    from . import preset_ui, ui
+    from . import handover, preset_ui, ui
+    handover.unregister()
     preset_ui.unregister()
     ui.unregister()

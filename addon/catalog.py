@@ -176,8 +176,8 @@ ENUM_ITEMS: dict[str, tuple[tuple[str, str, str], ...]] = {
     # docs/light-sampling.md: the native part plus a non-negative stochastic residual.
     "estimator": (
         ("light_sampled", "Native + Residual",
-         "Cycles aims rays at lamps, the sun and bright sky for most of the reflection, so "
-         "highlights clear up as fast as with Cycles' own BSDFs (GGX only)"),
+         "Cycles aims rays at lamps, the sun and bright sky for most of a GGX reflection, and "
+         "the rest is aimed at the scene's lamps, so highlights clear up fast"),
         ("stochastic", "Stochastic",
          "The teaching form: one random mirror direction per sample, which finds lamps only "
          "by chance (far noisier under small lamps and the sun)"),
@@ -206,10 +206,10 @@ MASKING_DOC = ("How microfacets shadow one another: Height-correlated as in Cycl
 # Same converged image either way: only the noise changes (docs/light-sampling.md).
 ESTIMATOR = Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
                   doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky "
-                      "for most of the reflection, so highlights from small lamps clear up "
-                      "fast (GGX only; Beckmann and near-mirror roughness render "
-                      "stochastically). Stochastic finds lamps only by chance. Both converge "
-                      "to the same image.")
+                      "for most of a GGX reflection, and aims the rest (all of a Beckmann one) "
+                      "at the scene's lamps, so highlights from small lamps clear up fast. "
+                      "Stochastic finds lamps only by chance. Both converge to the same "
+                      "image.")
 
 MODELS: dict[str, Model] = {}
 
@@ -248,6 +248,8 @@ COOK_TORRANCE = _add(Model(
               doc="How reflection directions are picked at random: changes the noise and "
                   "render time, not the converged look. V-cavity visible normals gives the "
                   "least noise for this model."),
+
+        ESTIMATOR,
     ),
 ))
 

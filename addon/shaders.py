@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from . import lamps as lamp_table
 from .catalog import COLOR, ENUM, ENUMS, FLOAT, Model
 
 OSL_DIR = Path(__file__).resolve().parent.parent / "osl"
@@ -84,13 +85,21 @@ def _inline_headers(source: str, seen: set[str]) -> str:
     return _LOCAL_INCLUDE.sub(replace, source)
 
 
-def shader_source(model: Model) -> str:
+def shader_source(model: Model, lamps=()) -> str:
+    """`lamps`: the LampRecords the shader may aim its residual at (addon/lamps.py); none by
+    default, which compiles the lamp code out."""
     source = (OSL_DIR / f"{model.shader}.osl").read_text()
     source = source.replace("    // @parameters", parameter_declarations(model))
     source = source.replace("    // @clamp_parameters", clamp_statements(model))
     source = _inline_headers(source, set())
+    source = source.replace("// @lamps", lamp_table.osl_block(lamps))
     # The enum codes precede everything, headers included.
     return enum_defines() + source
+
+
+def uses_lamps(model: Model) -> bool:
+    """Whether the model's shader aims at the scene's lamps (includes lamps.h)."""
+    return '#include "lamps.h"' in (OSL_DIR / f"{model.shader}.osl").read_text()
 
 
 # --- bpy ------------------------------------------------------------------------------------
@@ -99,11 +108,12 @@ def text_name(model: Model) -> str:
     return f"{TEXT_PREFIX}{model.shader}.osl"
 
 
-def ensure_text(model: Model):
-    """The text datablock holding the model's OSL source, created or refreshed."""
+def ensure_text(model: Model, lamps=()):
+    """The text datablock holding the model's OSL source (with the given lamp table), created
+    or refreshed."""
     import bpy
 
-    source = shader_source(model)
+    source = shader_source(model, lamps)
     text = bpy.data.texts.get(text_name(model))
     if text is None:
         text = bpy.data.texts.new(text_name(model))
@@ -117,7 +127,7 @@ class ShaderCompileError(RuntimeError):
     pass
 
 
-def compile_script_node(node, model: Model) -> None:
+def compile_script_node(node, model: Model, lamps=()) -> None:
     """Point an INTERNAL Script node at the model's text and compile it now.
 
     Uses the Cycles add-on's own compile function, which works headless (the UI operator does
@@ -128,7 +138,7 @@ def compile_script_node(node, model: Model) -> None:
 
     compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
 
-    text = ensure_text(model)
+    text = ensure_text(model, lamps)
     node.mode = "INTERNAL"
     node.script = text
     messages = []

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import compat, nodes, shaders
+from . import compat, handover, nodes, shaders
 from .catalog import ENUM, MODELS
 
 DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT = (
@@ -328,6 +328,7 @@ def prune_and_compile(scene, report: Report) -> None:
         for _, node in _lab_nodes(mat) if mat is not None else []:
             scene_groups.add(node.node_tree.name_full)
     compiled, up_to_date = set(), set()
+    records = handover.scene_lamps(scene)
     for name in sorted(scene_groups):
         group = bpy.data.node_groups[name]
         model = group_model(group)
@@ -335,11 +336,11 @@ def prune_and_compile(scene, report: Report) -> None:
             continue
         script = group.nodes[nodes.SCRIPT_NODE_NAME]
         current = script.script is not None and script.bytecode \
-            and script.script.as_string() == shaders.shader_source(model)
+            and script.script.as_string() == shaders.shader_source(model, records)
         if current:
             up_to_date.add(model.id)
-        else:  # stale or missing bytecode: compile from the add-on's current OSL
-            shaders.compile_script_node(script, model)
+        else:  # stale or missing bytecode: compile from the add-on's current OSL and lamps
+            shaders.compile_script_node(script, model, records)
             compiled.add(model.id)
     report.compiled, report.up_to_date = sorted(compiled), sorted(up_to_date)
     referenced = _referenced_groups()

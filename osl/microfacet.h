@@ -367,6 +367,26 @@ float sample_reflection_factor(int sampler, int dist, vector wi, float ax, float
     return (dot(wi, m) > 0.0) ? inv_pdf_factor : 0.0;
 }
 
+// Density over solid angle of the reflected direction wo = reflect(wi, h) under each sampler:
+// pdf_m(h) / (4 wi.h) (Walter 2007 eq. 14), pdf_m = D cos (Walter 2007 eq. 24), the visible
+// normals G1(wi) <wi,h> D / wi.n (Heitz & d'Eon 2014 eq. 2) or the V-cavity's (Heitz 2014
+// sec. 6). D / (4 wi.n pdf) is then what sample_reflection_factor returns for that h.
+float reflection_pdf(int sampler, int dist, vector wi, vector h, float ax, float ay)
+{
+    float c = dot(wi, h);
+    if (c <= 0.0 || h[2] <= 0.0 || wi[2] <= 0.0)
+        return 0.0;
+    float d = D(dist, h, ax, ay);
+    float pdf_m;
+    if (sampler == MFL_SAMPLER_DCOS)
+        pdf_m = d * h[2];
+    else if (sampler == MFL_SAMPLER_VNDF)
+        pdf_m = G1(dist, wi, h, ax, ay) * c * d / wi[2];
+    else
+        pdf_m = G1_vcavity(wi, h) * c * d / wi[2];
+    return pdf_m / (4.0 * c);
+}
+
 // One reflection sample of a single-scattering microfacet BRDF: returns the normal m that
 // mirrors wi into wo, and the sample weight without Fresnel, f cos / (F pdf), in closed form
 // per sampler (seed eq. 4-7 and fig. 12; Heitz & d'Eon 2014 eq. 8; Heitz 2014 sec. 6):
@@ -496,10 +516,14 @@ color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax
 // it adds every other closure's value in that direction with the balance heuristic, taking
 // 1e6 for the singular pdf, which biases a sharp native lobe beside a delta residual (gold at
 // roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q = a / (a + r),
-// a and r the channel sums of the two weights, and divided by it: exact, and both choices then
-// carry the same total weight a + r, so the choice itself adds noise only through colour.
+// a the channel sum of the native weight and r that of w_choice, the residual's weight as the
+// model's sampler alone would give its direction, and divided by it: exact for any q (q = 1
+// where the residual is 0), and the two choices then carry about the same total weight, so the
+// choice adds little noise. r is not the aimed weight itself: a residual ray aimed at a lamp has
+// a small weight, so it would be chosen rarely and then carry the whole a + r into the lamp, a
+// rare and heavy sample (a separable gold sphere under a 4-degree sun: pixels +1.0 at 512 spp).
 closure color split_closures(color w_native, closure color native, color w_residual,
-                             closure color residual, float u)
+                             closure color residual, color w_choice, float u)
 {
     float a = max(w_native[0] + w_native[1] + w_native[2], 0.0);
     float r = max(w_residual[0] + w_residual[1] + w_residual[2], 0.0);
@@ -507,7 +531,7 @@ closure color split_closures(color w_native, closure color native, color w_resid
         return w_native * native;
     if (a <= 0.0)
         return w_residual * residual;
-    float q = a / (a + r);
+    float q = a / (a + max(w_choice[0] + w_choice[1] + w_choice[2], r));
     if (u < q)
         return (w_native / q) * native;
     return (w_residual / (1.0 - q)) * residual;

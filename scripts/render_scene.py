@@ -201,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
         report = specialize.specialize(scene)
         for line in report.lines():
             log(f"specialize: {line}")
+    from addon import handover
+
+    handover.hand_over(scene)  # the lamps' table, as the add-on's render_pre handler does
     if args.save_blend:
         path = Path(args.save_blend).resolve()
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -39,7 +39,7 @@ def test_mirror_sphere_sees_the_analytic_environment():
 def test_compile_guard_fails_loudly_on_a_broken_shader(monkeypatch):
     harness.new_scene()
     model = MODELS["walter_reflection"]
-    monkeypatch.setattr(shaders, "shader_source", lambda m: "shader broken( { syntax error")
+    monkeypatch.setattr(shaders, "shader_source", lambda m, lamps=(): "shader broken( { syntax error")
     tree = bpy.data.node_groups.new("guard", "ShaderNodeTree")
     script = tree.nodes.new("ShaderNodeScript")
     with pytest.raises(shaders.ShaderCompileError, match="no bytecode or no sockets"):

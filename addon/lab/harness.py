@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 
 from .. import compat
-from .. import nodes
+from .. import handover, nodes
 from .grid import Environment, GridLayout
 
 compat.expose_bundled_modules()  # oslquery (osl_material compiles raw OSL), OpenImageIO (render)
@@ -271,6 +271,7 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
         tmp.close()
         path = tmp.name
     scene.render.filepath = path
+    handover.hand_over(scene)  # what the add-on's render_pre handler does for F12
     start = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     seconds = time.perf_counter() - start

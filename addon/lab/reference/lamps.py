@@ -1,0 +1,187 @@
+"""The residual's direct light in numpy: lamp sampling and the guided residual, the twin of
+osl/lamps.h (docs/light-sampling.md, "The residual's direct light").
+
+The shader draws its residual's direction from the mixture
+    p(wo) = (1 - lam) p_model(wo) + lam sum_j pi_j p_j(wo)
+and weights it r cos / p(wo) (Veach 1997, one-sample balance heuristic), so the estimate is
+exact whatever the lamp records say. Records are addon/lamps.py LampRecords (world space); here
+the shading frame is the world frame (n = z, tangent = x), so local and world directions agree.
+
+Shapes: points P and normals (..., 3); directions (..., 3); uniforms (...,).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...lamps import LampRecord
+from .microfacet import dot, normalize, reflect
+from .split import eval_native
+
+# osl/lamps.h MFL_GUIDE_FRACTION (tests/test_reference_lamps.py checks they agree).
+GUIDE_FRACTION = 0.5
+
+
+def _cone(rec: LampRecord, P):
+    """(axis, 1 - cos, sin^2, valid) of the cone toward the sun or a sphere lamp from P."""
+    P = np.asarray(P, dtype=float)
+    if rec.kind == "sun":
+        axis = np.broadcast_to(np.asarray(rec.axis, dtype=float), P.shape)
+        omc = np.full(P.shape[:-1], rec.size)
+        return axis, omc, omc * (2.0 - omc), np.ones(P.shape[:-1], bool)
+    to = np.asarray(rec.position, dtype=float) - P
+    d2 = np.sum(to * to, axis=-1)
+    valid = d2 > rec.size ** 2
+    d2s = np.where(valid, d2, 1.0)
+    sin2 = np.where(valid, rec.size ** 2 / d2s, 1.0)
+    omc = sin2 / (1.0 + np.sqrt(np.maximum(1.0 - sin2, 0.0)))
+    return to / np.sqrt(d2s)[..., None], omc, sin2, valid
+
+
+def _area(rec: LampRecord) -> float:
+    a = np.linalg.norm(rec.u) * np.linalg.norm(rec.v)
+    return float(np.pi * a if rec.kind == "ellipse" else 4.0 * a)
+
+
+def lamp_weight(rec: LampRecord, P, Ng):
+    """Guiding weight of a lamp at P (osl lamp_weight): a rough irradiance, 0 where the lamp is
+    behind the surface, P inside it or behind an area lamp."""
+    P, Ng = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(Ng, dtype=float))
+    if rec.kind == "sun":
+        s = np.sqrt(rec.size * (2.0 - rec.size))
+        return np.where(dot(Ng, np.asarray(rec.axis)) > -s, rec.power, 0.0)
+    to = np.asarray(rec.position, dtype=float) - P
+    d2 = np.sum(to * to, axis=-1)
+    if rec.kind == "sphere":
+        ok = (d2 > rec.size ** 2) & (dot(Ng, to) >= -rec.size)
+        return np.where(ok, rec.power / (4.0 * np.pi * np.where(ok, d2, 1.0)), 0.0)
+    front = -dot(np.asarray(rec.axis), to)
+    extent = np.linalg.norm(rec.u) + np.linalg.norm(rec.v)
+    ok = (front > 0.0) & (dot(Ng, to) >= -extent)
+    d2s = np.where(ok, d2, 1.0)
+    return np.where(ok, rec.power * front / (np.pi * np.sqrt(d2s) * np.maximum(d2s, _area(rec))),
+                    0.0)
+
+
+def _frame(axis):
+    helper = np.where((np.abs(axis[..., 2]) < 0.9)[..., None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    t = normalize(np.cross(helper, axis))
+    return t, np.cross(axis, t)
+
+
+def sample_lamp(rec: LampRecord, P, u1, u2):
+    """A direction toward the lamp from P, drawn from p_i (uniform over the cone or the area)."""
+    P = np.asarray(P, dtype=float)
+    u1, u2 = np.broadcast_arrays(np.asarray(u1, dtype=float), np.asarray(u2, dtype=float))
+    if rec.kind in ("sun", "sphere"):
+        axis, omc, _, _ = _cone(rec, P)
+        s = u1 * omc
+        sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
+        phi = 2.0 * np.pi * u2
+        t, b = _frame(axis)
+        return ((sin_t * np.cos(phi))[..., None] * t + (sin_t * np.sin(phi))[..., None] * b
+                + (1.0 - s)[..., None] * axis)
+    if rec.kind == "ellipse":
+        r = np.sqrt(u1)
+        s, t = r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)
+    else:
+        s, t = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    q = (np.asarray(rec.position) + s[..., None] * np.asarray(rec.u)
+         + t[..., None] * np.asarray(rec.v))
+    return normalize(q - P)
+
+
+def lamp_pdf(rec: LampRecord, P, dirs):
+    """p_i(dir) over solid angle (osl lamp_pdf)."""
+    P, dirs = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(dirs, dtype=float))
+    if rec.kind in ("sun", "sphere"):
+        axis, omc, sin2, valid = _cone(rec, P)
+        c = np.cross(dirs, axis)
+        inside = valid & (dot(dirs, axis) > 0.0) & (np.sum(c * c, axis=-1) <= sin2)
+        return np.where(inside, 1.0 / (2.0 * np.pi * np.where(inside, omc, 1.0)), 0.0)
+    n = np.asarray(rec.axis, dtype=float)
+    u, v, c = (np.asarray(x, dtype=float) for x in (rec.u, rec.v, rec.position))
+    cos_l = -dot(dirs, n)
+    ok = cos_l > 0.0
+    dist = np.where(ok, dot(P - c, n) / np.where(ok, cos_l, 1.0), -1.0)
+    q = P + dist[..., None] * dirs - c
+    s, t = dot(q, u) / np.dot(u, u), dot(q, v) / np.dot(v, v)
+    inside = (s * s + t * t <= 1.0) if rec.kind == "ellipse" else \
+        (np.abs(s) <= 1.0) & (np.abs(t) <= 1.0)
+    ok &= (dist > 0.0) & inside
+    return np.where(ok, dist * dist / (_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
+
+
+def guide_fraction(records, P, Ng):
+    """(lam, total): GUIDE_FRACTION where some lamp has weight at P, else 0; the weights' sum."""
+    P = np.asarray(P, dtype=float)
+    total = np.zeros(P.shape[:-1])
+    for rec in records:
+        total = total + lamp_weight(rec, P, Ng)
+    return np.where(total > 0.0, GUIDE_FRACTION, 0.0), total
+
+
+def lamps_pdf(records, P, Ng, dirs):
+    """sum_j pi_j p_j(dir), pi_j = weight_j / total."""
+    _, total = guide_fraction(records, P, Ng)
+    pdf = 0.0
+    for rec in records:
+        pdf = pdf + lamp_weight(rec, P, Ng) * lamp_pdf(rec, P, dirs)
+    return np.where(total > 0.0, pdf / np.where(total > 0.0, total, 1.0), 0.0)
+
+
+def sample_lamps(records, P, Ng, u0, u1, u2):
+    """Lamp j with probability pi_j, then a direction from p_j."""
+    P = np.asarray(P, dtype=float)
+    weights = np.stack([np.broadcast_to(lamp_weight(r, P, Ng), P.shape[:-1]) for r in records],
+                       axis=-1)
+    cdf = np.cumsum(weights, axis=-1)
+    target = np.asarray(u0) * cdf[..., -1]
+    chosen = np.minimum(np.sum(cdf <= target[..., None], axis=-1), len(records) - 1)
+    out = np.zeros(P.shape)
+    for j, rec in enumerate(records):
+        sel = chosen == j
+        out[sel] = sample_lamp(rec, P[sel], np.asarray(u1)[sel], np.asarray(u2)[sel])
+    return out
+
+
+def reflection_pdf(bsdf, wi, m):
+    """The model sampler's density of wo = reflect(wi, m): pdf_m(m) / (4 wi.m) (osl
+    reflection_pdf)."""
+    mf, c = bsdf.mf, dot(wi, m)
+    if bsdf.sampler == "dcos":
+        pdf_m = mf.pdf_dcos(m)
+    elif bsdf.sampler == "vndf":
+        pdf_m = mf.pdf_vndf(wi, m)
+    else:
+        pdf_m = mf.pdf_vcavity(wi, m)
+    ok = (c > 0.0) & (m[..., 2] > 0.0) & (wi[..., 2] > 0.0)
+    return np.where(ok, pdf_m / (4.0 * np.where(ok, c, 1.0)), 0.0)
+
+
+def sample_guided_residual(bsdf, records, P, wi, u):
+    """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
+    r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
+    sample_guided_reflection). u: (..., 7) uniforms: 3 for the model's sampler, the choice
+    between lamps and model, the lamp, and 2 for the lamp's direction."""
+    P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
+    shape = np.broadcast_shapes(P.shape, wi.shape, u.shape[:-1] + (3,))
+    P, wi = np.broadcast_to(P, shape), np.broadcast_to(wi, shape)
+    u = np.broadcast_to(u, shape[:-1] + (7,))
+    Ng = np.broadcast_to([0.0, 0.0, 1.0], shape)
+    lam, _ = guide_fraction(records, P, Ng)
+    m_model, _ = bsdf.sample_normal(wi, u[..., :3])
+    wo = reflect(wi, m_model)
+    if records:
+        aimed = u[..., 3] < lam
+        wo = np.where(aimed[..., None],
+                      sample_lamps(records, P, Ng, u[..., 4], u[..., 5], u[..., 6]), wo)
+    m = normalize(wi + wo)
+    p_model = (1.0 - lam) * reflection_pdf(bsdf, wi, m)
+    pdf = p_model + lam * (lamps_pdf(records, P, Ng, wo) if records else 0.0)
+    r_cos = (bsdf.eval_specular(wi, wo) - eval_native(bsdf, wi, wo)) * \
+        np.maximum(wo[..., 2], 0.0)[..., None]
+    ok = (pdf > 0.0) & (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
+    weight = np.where(ok[..., None], np.maximum(r_cos, 0.0) / np.where(ok, pdf, 1.0)[..., None],
+                      0.0)
+    share = np.where(ok, p_model / np.where(ok, pdf, 1.0), 1.0)
+    return wo, weight, share

@@ -1,0 +1,258 @@
+// Microfacet Lab: the residual's direct light, the twin of addon/lab/reference/lamps.py
+// (docs/light-sampling.md, "The residual's direct light").
+//
+// The add-on writes the scene's lamps into the table below (addon/lamps.py, slots listed
+// there). A shader draws its residual's delta-lobe direction from the mixture
+//   p(wo) = (1 - lam) p_model(wo) + lam sum_j pi_j p_j(wo),
+// p_j uniform over lamp j's solid angle (sun cone, the cone of a sphere lamp) or over its area,
+// pi_j proportional to a rough irradiance of lamp j at P, lam = MFL_GUIDE_FRACTION when some
+// lamp can be aimed at from P (else 0), and weights the sample r cos / p(wo) (Veach 1997, the
+// one-sample balance heuristic). The reflected ray is an ordinary ray: it meets the lamp, or
+// whatever blocks it, and Cycles adds what it finds, so the table only moves noise: a stale or
+// missing lamp never biases, an occluder is never crossed, and no lamp is counted twice.
+
+// @lamps
+#define MFL_LAMP_SUN 0
+#define MFL_LAMP_SPHERE 1
+#define MFL_LAMP_RECT 2
+#define MFL_LAMP_ELLIPSE 3
+#define MFL_GUIDE_FRACTION 0.5
+
+#if MFL_LAMP_COUNT > 0
+vector lamp_vector(int i, int j)
+{
+    return vector(lamp_datum(i, j), lamp_datum(i, j + 1), lamp_datum(i, j + 2));
+}
+
+int lamp_kind(int i) { return int(lamp_datum(i, 0) + 0.5); }
+
+// Cone of directions toward lamp i from P (sun, sphere): axis, 1 - cos and sin^2 of its
+// half-angle. Returns 0 when P is inside the sphere.
+int lamp_cone(int i, point P, output vector axis, output float one_minus_cos,
+              output float sin2)
+{
+    if (lamp_kind(i) == MFL_LAMP_SUN) {
+        axis = lamp_vector(i, 4);
+        one_minus_cos = lamp_datum(i, 13);
+        sin2 = one_minus_cos * (2.0 - one_minus_cos);
+        return 1;
+    }
+    vector to = lamp_vector(i, 1) - P;
+    float d2 = dot(to, to);
+    float r = lamp_datum(i, 13);
+    if (d2 <= r * r)
+        return 0;
+    axis = to / sqrt(d2);
+    sin2 = r * r / d2;
+    one_minus_cos = sin2 / (1.0 + sqrt(1.0 - sin2));  // 1 - sqrt(1 - s2), no cancellation
+    return 1;
+}
+
+float lamp_area(int i)
+{
+    float a = length(lamp_vector(i, 7)) * length(lamp_vector(i, 10));
+    return (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? MFL_PI * a : 4.0 * a;
+}
+
+// Guiding weight of lamp i at P with normal Ng: a rough irradiance; 0 when the lamp is behind
+// the surface, P is inside it or behind an area lamp. Any choice is exact (only the noise
+// depends on it), as long as sampling and density use the same one.
+float lamp_weight(int i, point P, normal Ng)
+{
+    float power = lamp_datum(i, 14);
+    int kind = lamp_kind(i);
+    if (kind == MFL_LAMP_SUN) {
+        float omc = lamp_datum(i, 13);
+        return (dot(Ng, lamp_vector(i, 4)) > -sqrt(omc * (2.0 - omc))) ? power : 0.0;
+    }
+    vector to = lamp_vector(i, 1) - P;
+    float d2 = dot(to, to);
+    if (kind == MFL_LAMP_SPHERE) {
+        float r = lamp_datum(i, 13);
+        if (d2 <= r * r || dot(Ng, to) < -r)
+            return 0.0;
+        return power / (4.0 * MFL_PI * d2);
+    }
+    float front = -dot(lamp_vector(i, 4), to);  // distance of P in front of the lamp's plane
+    float extent = length(lamp_vector(i, 7)) + length(lamp_vector(i, 10));
+    if (front <= 0.0 || dot(Ng, to) < -extent)
+        return 0.0;
+    return power * front / (MFL_PI * sqrt(d2) * max(d2, lamp_area(i)));
+}
+
+// Uniform direction in the cone around axis with the given 1 - cos(half-angle).
+vector sample_cone(vector axis, float one_minus_cos, float u1, float u2)
+{
+    float s = u1 * one_minus_cos;  // 1 - cos(theta)
+    float cos_t = 1.0 - s;
+    float sin_t = sqrt(max(s * (2.0 - s), 0.0));
+    float phi = 2.0 * MFL_PI * u2;
+    vector t, b;
+    make_frame(normal(axis), t, b);
+    return (sin_t * cos(phi)) * t + (sin_t * sin(phi)) * b + cos_t * axis;
+}
+
+// A direction toward lamp i from P (world space), drawn from p_i.
+vector sample_lamp(int i, point P, float u1, float u2)
+{
+    int kind = lamp_kind(i);
+    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
+        vector axis;
+        float omc, sin2;
+        if (!lamp_cone(i, P, axis, omc, sin2))
+            return vector(0, 0, 1);
+        return sample_cone(axis, omc, u1, u2);
+    }
+    float s, t;
+    if (kind == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
+        float r = sqrt(u1);
+        s = r * cos(2.0 * MFL_PI * u2);
+        t = r * sin(2.0 * MFL_PI * u2);
+    }
+    else {
+        s = 2.0 * u1 - 1.0;
+        t = 2.0 * u2 - 1.0;
+    }
+    point q = lamp_vector(i, 1) + s * lamp_vector(i, 7) + t * lamp_vector(i, 10);
+    return normalize(q - P);
+}
+
+// p_i(dir) over solid angle: uniform over a cone, or area density dist^2 / (A |cos|).
+float lamp_pdf(int i, point P, vector dir)
+{
+    int kind = lamp_kind(i);
+    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
+        vector axis;
+        float omc, sin2;
+        if (!lamp_cone(i, P, axis, omc, sin2))
+            return 0.0;
+        vector c = cross(dir, axis);  // sin^2 from the cross product: exact for tiny cones
+        if (dot(dir, axis) <= 0.0 || dot(c, c) > sin2)
+            return 0.0;
+        return 1.0 / (2.0 * MFL_PI * omc);
+    }
+    vector n = lamp_vector(i, 4);
+    float cos_l = -dot(dir, n);
+    if (cos_l <= 0.0)
+        return 0.0;
+    vector u = lamp_vector(i, 7);
+    vector v = lamp_vector(i, 10);
+    point c = lamp_vector(i, 1);
+    float dist = dot(P - c, n) / cos_l;
+    if (dist <= 0.0)
+        return 0.0;
+    vector q = P + dist * dir - c;
+    float s = dot(q, u) / dot(u, u);
+    float t = dot(q, v) / dot(v, v);
+    int inside = (kind == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+                                            : (abs(s) <= 1.0 && abs(t) <= 1.0);
+    return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
+}
+
+float lamps_total_weight(point P, normal Ng)
+{
+    float total = 0.0;
+    for (int i = 0; i < MFL_LAMP_COUNT; i++)
+        total += lamp_weight(i, P, Ng);
+    return total;
+}
+
+// sum_j pi_j p_j(dir), pi_j = weight_j / total.
+float lamps_pdf(point P, normal Ng, float total, vector dir)
+{
+    if (total <= 0.0)
+        return 0.0;
+    float pdf = 0.0;
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        float w = lamp_weight(i, P, Ng);
+        if (w > 0.0)
+            pdf += w * lamp_pdf(i, P, dir);
+    }
+    return pdf / total;
+}
+
+// Lamp j with probability pi_j, then a direction from p_j.
+vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u2)
+{
+    float target = u0 * total;
+    int chosen = -1;
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        float w = lamp_weight(i, P, Ng);
+        if (w > 0.0) {
+            chosen = i;  // the last lamp with weight catches rounding at u0 near 1
+            if (target < w)
+                break;
+            target -= w;
+        }
+    }
+    return (chosen >= 0) ? sample_lamp(chosen, P, u1, u2) : vector(0, 0, 1);
+}
+#endif
+
+// lam for a shading point: MFL_GUIDE_FRACTION when some lamp has weight there, else 0; total
+// receives the sum of the lamps' weights.
+float guide_fraction(point P, normal Ng, output float total)
+{
+    total = 0.0;
+#if MFL_LAMP_COUNT > 0
+    total = lamps_total_weight(P, Ng);
+    if (total > 0.0)
+        return MFL_GUIDE_FRACTION;
+#endif
+    return 0.0;
+}
+
+vector sample_lamps_local(point P, normal Ng, float total, vector t, vector b, normal n,
+                          vector key)
+{
+#if MFL_LAMP_COUNT > 0
+    return to_local(sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9)), t, b, n);
+#else
+    return vector(0, 0, 1);
+#endif
+}
+
+float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, vector b,
+                          normal n)
+{
+#if MFL_LAMP_COUNT > 0
+    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n));
+#else
+    return 0.0;
+#endif
+}
+
+// One direction for a reflection residual, from the mixture above when some lamp can be aimed
+// at from P, else from the model's sampler alone. Returns the factor that multiplies the
+// residual's F G2 - c G2_hc in its sample weight, D(m) / (4 wi.n p(wo)) (with the model's
+// sampler alone this is sample_reflection_factor's closed form), and the half vector m of wi
+// and wo. model_share receives (1 - lam) p_model(wo) / p(wo), 1 without lamps: the weight over
+// it is what the model's sampler alone would give wo, which split_closures chooses with (a
+// choice made from the guided weight itself would undo the aiming: see split_closures).
+// 0 for an invalid sample.
+float sample_guided_reflection(int sampler, int dist, vector wi, float ax, float ay, vector t,
+                               vector b, normal n, vector key, output vector m,
+                               output vector wo, output float model_share)
+{
+    model_share = 1.0;
+    float total;
+    float lam = guide_fraction(P, n, total);
+    if (lam <= 0.0 || rng(key, 6) >= lam) {
+        float factor = sample_reflection_factor(sampler, dist, wi, ax, ay, key, m);
+        wo = reflect_about(wi, m);
+        if (lam <= 0.0 || factor <= 0.0)
+            return factor;
+    }
+    else {
+        wo = sample_lamps_local(P, n, total, t, b, n, key);
+        m = normalize(wi + wo);
+    }
+    if (wi[2] <= 0.0 || wo[2] <= 0.0)
+        return 0.0;
+    float p_model = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
+    float pdf = p_model + lam * lamps_density_local(P, n, total, wo, t, b, n);
+    if (pdf <= 0.0)
+        return 0.0;
+    model_share = p_model / pdf;
+    return D(dist, m, ax, ay) / (4.0 * wi[2] * pdf);
+}

@@ -1,0 +1,224 @@
+"""The residual's direct light in numpy (addon/lab/reference/lamps.py, twin of osl/lamps.h) and
+the lamp records the add-on hands over (addon/lamps.py).
+
+What this catches: a lamp sampler whose density is not the one the shader divides by (a biased
+residual: too bright or too dark under that lamp), a density that misses part of the lamp (the
+same), a guided estimator that is not the residual (its furnace and lamp integrals must be the
+unguided ones), an aiming that does not lower the second moment under a small lamp (the point
+of it), bad lamp values that reach the shader (NaN, negative, zero size), and OSL constants
+that drift from numpy's.
+Tolerances: Monte Carlo, from the samples' own standard errors (5 sigma), and analytic
+solid angles."""
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addon import lamps as records_mod
+from addon.lab.reference import lamps, make_bsdf, split
+from addon.lab.reference.microfacet import normalize
+
+ROOT = Path(__file__).resolve().parent.parent
+P0 = np.array([0.3, -0.2, 0.0])
+SUN = records_mod.sun_record((0.4, 0.3, 0.8), math.radians(4.0), 1.0)
+SPHERE = records_mod.sphere_record((1.0, 0.5, 2.0), 0.3, 50.0)
+
+
+def _area(shape, centre, u, v):
+    """An area lamp spanned by u, v, emitting toward P0 (normal = -(u x v) or u x v)."""
+    n = np.cross(u, v)
+    n = n if np.dot(n, P0 - np.array(centre)) > 0 else -n
+    return records_mod.area_record(shape, centre, tuple(n), u, v, 20.0)
+
+
+RECT = _area("RECTANGLE", (-0.5, 0.4, 1.5), (0.4, 0.0, 0.08), (0.0, 0.25, 0.0))
+DISK = _area("DISK", (0.8, -1.0, 1.2), (0.3, 0.25, 0.0), (-0.1, 0.12, 0.15))
+LAMPS = [SUN, SPHERE, RECT, DISK]
+
+
+def _mean_and_error(x):
+    x = np.asarray(x, dtype=float)
+    return x.mean(axis=0), x.std(axis=0) / math.sqrt(len(x))
+
+
+def _solid_angle_by_uniform_directions(rec, n=2_000_000, seed=0):
+    """The lamp's solid angle seen from P0, by uniform directions on the sphere: the fraction
+    whose density is positive, and the integral of the density (must be 1)."""
+    d = normalize(np.random.default_rng(seed).normal(size=(n, 3)))
+    pdf = lamps.lamp_pdf(rec, P0, d)
+    hit = pdf > 0
+    return 4 * np.pi * hit.mean(), 4 * np.pi * pdf.mean(), 4 * np.pi * pdf.std() / math.sqrt(n)
+
+
+def _analytic_solid_angle(rec):
+    if rec.kind in ("sun", "sphere"):
+        _, omc, _, _ = lamps._cone(rec, P0[None])
+        return 2 * np.pi * float(omc[0])
+    return None
+
+
+@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind)
+def test_each_lamp_density_integrates_to_one(rec):
+    _, integral, err = _solid_angle_by_uniform_directions(rec)
+    assert abs(integral - 1.0) < 5 * err + 1e-3
+
+
+@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind)
+def test_lamp_samples_land_where_the_density_is_and_weigh_the_solid_angle(rec):
+    """E[1 / p(dir)] over the lamp's own samples is its solid angle (analytic for cones, by
+    uniform directions for areas); every sample has p > 0."""
+    rng = np.random.default_rng(1)
+    n = 400_000
+    d = lamps.sample_lamp(rec, np.broadcast_to(P0, (n, 3)), rng.random(n), rng.random(n))
+    pdf = lamps.lamp_pdf(rec, P0, d)
+    assert np.mean(pdf > 0) > 1 - 1e-4  # a few on the rim may round outside
+    inv = np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
+    mean, err = _mean_and_error(inv)
+    analytic = _analytic_solid_angle(rec)
+    if analytic is None:
+        omega, _, _ = _solid_angle_by_uniform_directions(rec)
+        assert abs(mean - omega) < 5 * err + 0.01 * omega
+    else:
+        assert abs(mean - analytic) < 5 * err + 1e-9
+
+
+def test_behind_inside_and_below_get_no_weight():
+    up = np.array([0.0, 0.0, 1.0])
+    inside = np.array(SPHERE.position) + 0.1
+    assert lamps.lamp_weight(SPHERE, inside, up) == 0.0
+    behind = np.array(RECT.position) - 0.5 * np.array(RECT.axis)  # behind the emitting side
+    assert lamps.lamp_weight(RECT, behind, up) == 0.0
+    assert lamps.lamp_weight(SUN, P0, -up) == 0.0  # the sun below this surface's horizon
+    assert lamps.lamp_weight(SUN, P0, up) == SUN.power
+
+
+BSDFS = {
+    "gold separable r0.5": ("walter_reflection", {"roughness": 0.5, "masking": "separable"}),
+    "gold r0.3": ("walter_reflection", {"roughness": 0.3}),
+    "beckmann gold r0.4": ("walter_reflection", {"roughness": 0.4, "distribution": "beckmann"}),
+    "cook-torrance r0.3": ("cook_torrance", {"roughness": 0.3, "specular": 1.0}),
+    "dcos dielectric r0.6": ("walter_reflection", {"roughness": 0.6, "sampler": "dcos",
+                                                   "fresnel_type": "dielectric"}),
+}
+WI = normalize(np.array([0.35, -0.3, 0.7]))
+
+
+def _guided(bsdf, records, n, seed):
+    u = np.random.default_rng(seed).random((n, 7))
+    return lamps.sample_guided_residual(bsdf, records, np.broadcast_to(P0, (n, 3)),
+                                        np.broadcast_to(WI, (n, 3)), u)
+
+
+def _cone_indicator(rec, wo):
+    return (lamps.lamp_pdf(rec, P0, wo) > 0)[..., None]
+
+
+def _residual_cos(bsdf, wo):
+    wi = np.broadcast_to(WI, wo.shape)
+    r = bsdf.eval_specular(wi, wo) - split.eval_native(bsdf, wi, wo)
+    return np.maximum(r, 0.0) * np.maximum(wo[..., 2], 0.0)[..., None]
+
+
+def _lamp_only_estimate(bsdf, rec, n, seed):
+    """The residual's integral over one lamp by sampling that lamp alone (its sampler is held
+    to its density above): mean of r cos / p_lamp and its standard error."""
+    rng = np.random.default_rng(seed)
+    wo = lamps.sample_lamp(rec, np.broadcast_to(P0, (n, 3)), rng.random(n), rng.random(n))
+    pdf = lamps.lamp_pdf(rec, P0, wo)[..., None]
+    return _mean_and_error(np.where(pdf > 0, _residual_cos(bsdf, wo) / np.where(pdf > 0, pdf, 1),
+                                    0.0))
+
+
+@pytest.mark.parametrize("name", BSDFS)
+def test_guided_residual_is_the_residual(name):
+    """The guided estimator's mean is the residual's: its whole albedo against the unguided
+    residual sampler (split.sample_residual), and its part inside each lamp against sampling
+    that lamp alone (where the lobe is faint the unguided sampler may not reach the lamp)."""
+    bsdf = make_bsdf(*BSDFS[name])
+    n = 200_000
+    wo_g, w_g, share = _guided(bsdf, LAMPS, n, 2)
+    assert np.all((share >= 0) & (share <= 1 + 1e-12))
+    u = np.random.default_rng(3).random((n, 3))
+    _, w_s = split.sample_residual(bsdf, np.broadcast_to(WI, (n, 3)), u)
+    pairs = [(_mean_and_error(w_g), _mean_and_error(w_s))]
+    pairs += [(_mean_and_error(w_g * _cone_indicator(r, wo_g)),
+               _lamp_only_estimate(bsdf, r, n, 10 + i)) for i, r in enumerate(LAMPS)]
+    for (mg, eg), (ms, es) in pairs:
+        assert np.all(np.abs(mg - ms) <= 5 * np.hypot(eg, es) + 1e-12), (mg, ms, eg, es)
+
+
+@pytest.mark.parametrize("name", BSDFS)
+def test_aiming_lowers_the_second_moment_under_a_small_sun(name):
+    """Under the 4-degree sun alone the guided estimator's second moment of the sun-lit part is
+    far below the unguided one's (the rare, heavy hits of a delta lobe are what it removes)."""
+    bsdf = make_bsdf(*BSDFS[name])
+    n = 200_000
+    wo_g, w_g, _ = _guided(bsdf, [SUN], n, 4)
+    lit_g = (w_g * _cone_indicator(SUN, wo_g)).sum(-1)
+    # The unguided second moment in closed form: E[(w 1_sun)^2] = integral over the sun of
+    # (r cos)^2 / p_model, here by sampling the sun (p_model of the model's sampler alone).
+    rng = np.random.default_rng(5)
+    wo = lamps.sample_lamp(SUN, np.broadcast_to(P0, (n, 3)), rng.random(n), rng.random(n))
+    p_sun = lamps.lamp_pdf(SUN, P0, wo)
+    p_model = lamps.reflection_pdf(bsdf, np.broadcast_to(WI, (n, 3)), normalize(WI + wo))
+    rc = _residual_cos(bsdf, wo).sum(-1)
+    ok = (p_sun > 0) & (p_model > 0)
+    unguided = np.mean(np.where(ok, rc ** 2 / np.where(ok, p_model * p_sun, 1.0), 0.0))
+    assert lit_g.mean() > 0
+    ratio = unguided / np.mean(lit_g ** 2)
+    assert ratio > 20, ratio
+
+
+def test_without_lamps_the_guided_sampler_is_the_model_sampler():
+    bsdf = make_bsdf(*BSDFS["gold separable r0.5"])
+    n = 50_000
+    u = np.random.default_rng(6).random((n, 7))
+    wo_g, w_g, share = lamps.sample_guided_residual(bsdf, [], np.broadcast_to(P0, (n, 3)),
+                                                    np.broadcast_to(WI, (n, 3)), u)
+    wo_s, w_s = split.sample_residual(bsdf, np.broadcast_to(WI, (n, 3)), u[:, :3])
+    assert np.all(share == 1.0)
+    np.testing.assert_allclose(wo_g, wo_s, atol=1e-12)
+    np.testing.assert_allclose(w_g, w_s, rtol=1e-9, atol=1e-12)
+
+
+# --- the records the add-on hands over -------------------------------------------------------
+
+@pytest.mark.parametrize("strength", [0.0, -3.0, float("nan"), float("inf"), "x"])
+def test_lamps_worth_nothing_are_not_aimed_at(strength):
+    assert records_mod.guiding_power(strength, (1.0, 1.0, 1.0)) == 0.0
+
+
+def test_huge_lamps_are_clamped_and_zero_size_lamps_dropped():
+    assert records_mod.guiding_power(1e300, (1.0, 1.0, 1.0)) == records_mod.MAX_POWER
+    assert records_mod.sun_record((0, 0, 1), 0.0, 1.0) is None
+    assert records_mod.sun_record((0, 0, 1), float("nan"), 1.0) is None
+    assert records_mod.sun_record((0, 0, 0), 0.1, 1.0) is None
+    assert records_mod.sphere_record((0, 0, 0), 0.0, 1.0) is None
+    assert records_mod.sphere_record((0, float("nan"), 0), 0.1, 1.0) is None
+    assert records_mod.area_record("SQUARE", (0, 0, 0), (0, 0, -1), (0, 0, 0), (0, 1, 0),
+                                   1.0) is None
+    # A tiny sun keeps 1 - cos(half-angle) without cancellation.
+    tiny = records_mod.sun_record((0, 0, 1), 1e-4, 1.0)
+    assert tiny.size == pytest.approx(1 - math.cos(5e-5), rel=1e-6)
+
+
+def test_the_osl_table_holds_every_record_and_nothing_without_lamps():
+    assert "#define MFL_LAMP_COUNT 0" in records_mod.osl_block([])
+    assert "lamp_datum" not in records_mod.osl_block([])
+    many = [records_mod.sphere_record((i, 0.0, 3.0), 0.1, 1.0) for i in range(100)]
+    block = records_mod.osl_block(many)
+    assert "#define MFL_LAMP_COUNT 100" in block
+    assert f"float table[{100 * records_mod.RECORD_SIZE}]" in block
+    assert len(records_mod.osl_block(many * 2).split("{")[-1].split(",")) == \
+        records_mod.MAX_LAMPS * records_mod.RECORD_SIZE
+    assert all(len(r.floats()) == records_mod.RECORD_SIZE for r in LAMPS)
+
+
+def test_osl_constants_are_the_numpy_ones():
+    src = (ROOT / "osl" / "lamps.h").read_text()
+    assert float(re.search(r"#define MFL_GUIDE_FRACTION (\S+)", src).group(1)) == \
+        lamps.GUIDE_FRACTION
+    for i, kind in enumerate(records_mod.KINDS):
+        assert re.search(rf"#define MFL_LAMP_{kind.upper()} {i}\b", src), kind
