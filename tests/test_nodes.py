@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 LABELS = {
     "cook_torrance": ["Diffuse Color", "Specular", "Roughness", "Fresnel", "IOR", "N (complex IOR)",
-                      "K (extinction)", "Sampler"],
+                      "K (extinction)", "Sampler", "Light Sampling"],
     "walter_reflection": ["Specular Tint", "Roughness", "Anisotropy", "Distribution", "Masking",
                           "Fresnel", "IOR", "N (complex IOR)", "K (extinction)", "Sampler",
                           "Light Sampling"],
