@@ -30,7 +30,8 @@ def _lamp_record(obj):
         return lamps.sun_record(tuple(m.col[2].xyz), float(light.angle), power)
     position = tuple(m.translation)
     if light.type in ("POINT", "SPOT"):
-        return lamps.sphere_record(position, float(light.shadow_soft_size), power)
+        return lamps.sphere_record(position, float(light.shadow_soft_size), power,
+                                   is_sphere=not getattr(light, "use_soft_falloff", True))
     if light.type == "AREA":
         size_x = float(light.size)
         size_y = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else size_x

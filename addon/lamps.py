@@ -14,7 +14,8 @@ Record slots (RECORD_SIZE floats, world space):
   10-12  v: area half-extent along the lamp's Y
   13     size: sun, 1 - cos(half-angle); sphere, radius
   14     power: guiding weight (strength times the colour's luminance), finite, > 0
-  15     unused
+  15     shape of a point or spot lamp: 1 a sphere, 0 a disk of that radius facing the shading
+         point (Blender's Soft Falloff, the default; Cycles' "is_sphere" off)
 """
 from __future__ import annotations
 
@@ -40,10 +41,11 @@ class LampRecord:
     v: tuple = (0.0, 0.0, 0.0)
     size: float = 0.0
     power: float = 1.0
+    is_sphere: bool = False
 
     def floats(self) -> list[float]:
         return ([float(KINDS.index(self.kind)), *self.position, *self.axis, *self.u, *self.v,
-                 self.size, self.power, 0.0])
+                 self.size, self.power, float(self.is_sphere)])
 
 
 def _finite(values) -> bool:
@@ -79,13 +81,14 @@ def sun_record(toward_light, angle: float, power: float):
     return LampRecord("sun", axis=d, size=one_minus_cos, power=power)
 
 
-def sphere_record(position, radius: float, power: float):
-    """A point or spot lamp: Cycles' sphere of `radius`; None for radius 0 (a point cannot be
-    hit by a ray) and bad values."""
+def sphere_record(position, radius: float, power: float, is_sphere: bool = False):
+    """A point or spot lamp of `radius`: with Soft Falloff (Blender's default) Cycles makes it a
+    disk facing the shading point, without it a sphere; None for radius 0 (a point cannot be hit
+    by a ray) and bad values."""
     if power <= 0.0 or not _finite(position) or not math.isfinite(radius) or radius <= 0.0:
         return None
     return LampRecord("sphere", position=tuple(map(float, position)), size=float(radius),
-                      power=power)
+                      power=power, is_sphere=bool(is_sphere))
 
 
 def area_record(shape: str, position, normal, u, v, power: float):

@@ -26,8 +26,8 @@ vector lamp_vector(int i, int j)
 
 int lamp_kind(int i) { return int(lamp_datum(i, 0) + 0.5); }
 
-// Cone of directions toward lamp i from P (sun, sphere): axis, 1 - cos and sin^2 of its
-// half-angle. Returns 0 when P is inside the sphere.
+// Cone of directions toward lamp i from P (sun; point or spot lamp, a sphere or a disk facing
+// P): axis, 1 - cos and sin^2 of its half-angle. Returns 0 when P is inside the lamp's radius.
 int lamp_cone(int i, point P, output vector axis, output float one_minus_cos,
               output float sin2)
 {
@@ -43,7 +43,8 @@ int lamp_cone(int i, point P, output vector axis, output float one_minus_cos,
     if (d2 <= r * r)
         return 0;
     axis = to / sqrt(d2);
-    sin2 = r * r / d2;
+    // A sphere subtends asin(r / d); a disk facing P (Soft Falloff) atan(r / d).
+    sin2 = r * r / ((lamp_datum(i, 15) > 0.5) ? d2 : d2 + r * r);
     one_minus_cos = sin2 / (1.0 + sqrt(1.0 - sin2));  // 1 - sqrt(1 - s2), no cancellation
     return 1;
 }

@@ -23,7 +23,8 @@ from addon.lab.reference.microfacet import normalize
 ROOT = Path(__file__).resolve().parent.parent
 P0 = np.array([0.3, -0.2, 0.0])
 SUN = records_mod.sun_record((0.4, 0.3, 0.8), math.radians(4.0), 1.0)
-SPHERE = records_mod.sphere_record((1.0, 0.5, 2.0), 0.3, 50.0)
+SPHERE = records_mod.sphere_record((1.0, 0.5, 2.0), 0.3, 50.0)  # Soft Falloff: a facing disk
+BALL = records_mod.sphere_record((-1.0, -0.5, 1.0), 0.4, 30.0, is_sphere=True)
 
 
 def _area(shape, centre, u, v):
@@ -35,7 +36,7 @@ def _area(shape, centre, u, v):
 
 RECT = _area("RECTANGLE", (-0.5, 0.4, 1.5), (0.4, 0.0, 0.08), (0.0, 0.25, 0.0))
 DISK = _area("DISK", (0.8, -1.0, 1.2), (0.3, 0.25, 0.0), (-0.1, 0.12, 0.15))
-LAMPS = [SUN, SPHERE, RECT, DISK]
+LAMPS = [SUN, SPHERE, BALL, RECT, DISK]
 
 
 def _mean_and_error(x):
@@ -53,19 +54,24 @@ def _solid_angle_by_uniform_directions(rec, n=2_000_000, seed=0):
 
 
 def _analytic_solid_angle(rec):
-    if rec.kind in ("sun", "sphere"):
-        _, omc, _, _ = lamps._cone(rec, P0[None])
-        return 2 * np.pi * float(omc[0])
+    """Cones: the sun's 2 pi (1 - cos h); a sphere's 2 pi (1 - sqrt(1 - r^2/d^2)); a disk of
+    radius r facing P0 2 pi (1 - d / sqrt(d^2 + r^2)). Areas: None."""
+    if rec.kind == "sun":
+        return 2 * np.pi * rec.size
+    if rec.kind == "sphere":
+        d, r = np.linalg.norm(np.array(rec.position) - P0), rec.size
+        cos_h = math.sqrt(1 - r * r / (d * d)) if rec.is_sphere else d / math.hypot(d, r)
+        return 2 * np.pi * (1 - cos_h)
     return None
 
 
-@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind)
+@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind + ("_ball" if r.is_sphere else ""))
 def test_each_lamp_density_integrates_to_one(rec):
     _, integral, err = _solid_angle_by_uniform_directions(rec)
     assert abs(integral - 1.0) < 5 * err + 1e-3
 
 
-@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind)
+@pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind + ("_ball" if r.is_sphere else ""))
 def test_lamp_samples_land_where_the_density_is_and_weigh_the_solid_angle(rec):
     """E[1 / p(dir)] over the lamp's own samples is its solid angle (analytic for cones, by
     uniform directions for areas); every sample has p > 0."""
@@ -81,7 +87,7 @@ def test_lamp_samples_land_where_the_density_is_and_weigh_the_solid_angle(rec):
         omega, _, _ = _solid_angle_by_uniform_directions(rec)
         assert abs(mean - omega) < 5 * err + 0.01 * omega
     else:
-        assert abs(mean - analytic) < 5 * err + 1e-9
+        assert abs(mean - analytic) < 5 * err + 1e-9 * analytic
 
 
 def test_behind_inside_and_below_get_no_weight():

@@ -32,7 +32,8 @@ def _cone(rec: LampRecord, P):
     d2 = np.sum(to * to, axis=-1)
     valid = d2 > rec.size ** 2
     d2s = np.where(valid, d2, 1.0)
-    sin2 = np.where(valid, rec.size ** 2 / d2s, 1.0)
+    # A sphere subtends asin(r / d); a disk facing P (Soft Falloff) atan(r / d).
+    sin2 = np.where(valid, rec.size ** 2 / (d2s if rec.is_sphere else d2s + rec.size ** 2), 1.0)
     omc = sin2 / (1.0 + np.sqrt(np.maximum(1.0 - sin2, 0.0)))
     return to / np.sqrt(d2s)[..., None], omc, sin2, valid
 

@@ -37,44 +37,58 @@ def sun_unit() -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def sun_cone_nodes(half_angle: float, n_r: int, n_phi: int):
-    """Directions and solid-angle weights of a product rule on the cone of half-angle
-    `half_angle` around the sun: Gauss-Legendre in the polar angle (weight sin), midpoint
-    (periodic trapezoid) in azimuth."""
-    d = sun_unit()
-    e1 = np.cross(d, [0.0, 0.0, 1.0])
-    e1 /= np.linalg.norm(e1)
+def cone_nodes(axis, half_angle, n_r: int, n_phi: int):
+    """Directions and solid-angle weights of a product rule on cones of half-angle `half_angle`
+    around `axis` (one cone, or one per point: axis (..., 3), half_angle (...)): Gauss-Legendre
+    in the polar angle (weight sin), midpoint (periodic trapezoid) in azimuth. Returns
+    (..., K, 3) directions and (..., K) weights, K = n_r n_phi."""
+    d = np.asarray(axis, dtype=float)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    half = np.asarray(half_angle, dtype=float)[..., None, None]
+    helper = np.where((np.abs(d[..., 2]) < 0.9)[..., None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    e1 = np.cross(d, helper)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
     e2 = np.cross(d, e1)
     x, w = np.polynomial.legendre.leggauss(n_r)
-    theta = 0.5 * half_angle * (x + 1.0)
-    wt = 0.5 * half_angle * w * np.sin(theta)
+    theta = 0.5 * half * (x[:, None] + 1.0)  # (..., n_r, 1)
+    wt = 0.5 * half * w[:, None] * np.sin(theta)
     phi = (np.arange(n_phi) + 0.5) * 2.0 * np.pi / n_phi
-    T, P = np.meshgrid(theta, phi, indexing="ij")
-    dirs = (np.cos(T)[..., None] * d + np.sin(T)[..., None]
-            * (np.cos(P)[..., None] * e1 + np.sin(P)[..., None] * e2))
-    weights = (wt[:, None] * np.full(n_phi, 2.0 * np.pi / n_phi)[None, :])
-    return dirs.reshape(-1, 3), weights.reshape(-1)
+    ct, st = np.cos(theta)[..., None], np.sin(theta)[..., None]
+    cp, sp = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    dirs = (ct * d[..., None, None, :] + st * (cp * e1[..., None, None, :]
+                                               + sp * e2[..., None, None, :]))
+    weights = np.broadcast_to(wt * (2.0 * np.pi / n_phi), dirs.shape[:-1])
+    shape = d.shape[:-1] + (n_r * n_phi,)
+    return dirs.reshape(shape + (3,)), weights.reshape(shape)
+
+
+def sun_cone_nodes(half_angle: float, n_r: int, n_phi: int):
+    """cone_nodes around the sun's direction: (K, 3) directions, (K,) weights."""
+    return cone_nodes(sun_unit(), half_angle, n_r, n_phi)
 
 
 def _sun_pixels(bsdf, n, t, b, m, dirs, weights) -> np.ndarray:
-    """The integral of f(wi, wo) |wo.n| over the cone's nodes for pixels with normal n, tangent
-    t, binormal b and mu m, in chunks of 256 pixels: (p, 3)."""
+    """The integral of f(wi, wo) |wo.n| over the nodes (shared: (K, 3) and (K,); or per pixel:
+    (p, K, 3) and (p, K)) for pixels with normal n, tangent t, binormal b and mu m, in chunks
+    of 256 pixels: (p, 3)."""
     wi = np.stack([np.sqrt(np.clip(1.0 - m * m, 0.0, 1.0)), np.zeros_like(m), m], -1)
     vals = np.empty((len(m), 3))
     for start in range(0, len(m), 256):
         s = slice(start, start + 256)
-        wo = np.stack([t[s] @ dirs.T, b[s] @ dirs.T, n[s] @ dirs.T], -1)  # (p, K, 3)
+        d = np.broadcast_to(dirs if dirs.ndim == 2 else dirs[s], (len(m[s]),) + dirs.shape[-2:])
+        w = np.broadcast_to(weights if weights.ndim == 1 else weights[s], d.shape[:-1])
+        wo = np.stack([np.einsum("pkj,pj->pk", d, frame[s]) for frame in (t, b, n)], -1)
         with np.errstate(all="ignore"):
             f = bsdf.eval(wi[s, None, :], wo)
         f = np.nan_to_num(f)
-        vals[s] = np.einsum("pkc,pk,k->pc", f, np.abs(wo[..., 2]), weights)
+        vals[s] = np.einsum("pkc,pk,pk->pc", f, np.abs(wo[..., 2]), w)
     return vals
 
 
-def sun_term(layout, specs, radiance: float, half_angle: float, nodes: tuple) -> np.ndarray:
-    """L_sun times the integral of f(wi, wo) |wo.n| over the sun's cone, per pixel (H, W, 3).
-    Spheres are invisible to secondary rays, so a reflected or transmitted ray meets the sun
-    directly (single-interface convention for glass)."""
+def _light_term(layout, specs, nodes_of):
+    """Per pixel (H, W, 3): the integral of f |wo.n| L over a light; `nodes_of(sel, points,
+    normals)` gives that light's directions and solid-angle weights times radiance for the
+    pixels sel (surface points and normals of those pixels; sphere centres at z = 0)."""
     from ..reference import make_bsdf
 
     index, normal, mu = layout.pixel_geometry()
@@ -82,7 +96,7 @@ def sun_term(layout, specs, radiance: float, half_angle: float, nodes: tuple) ->
     flat = np.linalg.norm(tangent, axis=-1) < 0.5  # mu = 1: any tangent
     tangent[flat] = [1.0, 0.0, 0.0]
     binormal = np.cross(normal, tangent)
-    dirs, weights = sun_cone_nodes(half_angle, *nodes)
+    centres = layout.centers()
     out = np.zeros(index.shape + (3,))
     bsdfs = {}
     for i, spec in enumerate(specs):
@@ -92,10 +106,35 @@ def sun_term(layout, specs, radiance: float, half_angle: float, nodes: tuple) ->
         key = _table_key(spec)
         if key not in bsdfs:
             bsdfs[key] = make_bsdf(spec.model_id, spec.values)
-        vals = _sun_pixels(bsdfs[key], normal[sel], tangent[sel], binormal[sel], mu[sel],
-                           dirs, weights)
-        out[sel] = radiance * vals
+        points = np.append(centres[i], 0.0) + layout.radius * normal[sel]
+        dirs, weights = nodes_of(sel, points, normal[sel])
+        out[sel] = _sun_pixels(bsdfs[key], normal[sel], tangent[sel], binormal[sel], mu[sel],
+                               dirs, weights)
     return out
+
+
+def sun_term(layout, specs, radiance: float, half_angle: float, nodes: tuple) -> np.ndarray:
+    """L_sun times the integral of f(wi, wo) |wo.n| over the sun's cone, per pixel (H, W, 3).
+    Spheres are invisible to secondary rays, so a reflected or transmitted ray meets the sun
+    directly (single-interface convention for glass)."""
+    dirs, weights = sun_cone_nodes(half_angle, *nodes)
+    return _light_term(layout, specs, lambda sel, points, normals: (dirs, radiance * weights))
+
+
+def point_lamp_term(layout, specs, position, lamp_radius: float, radiance: float,
+                    nodes: tuple, is_sphere: bool = False) -> np.ndarray:
+    """The same for a point lamp of uniform radiance: the cone it subtends from each surface
+    point, half-angle atan(r / d) for the disk facing the point that Cycles makes of it with
+    Soft Falloff (Blender's default), asin(r / d) for a sphere."""
+    def nodes_of(sel, points, normals):
+        to = np.asarray(position, dtype=float) - points
+        d = np.linalg.norm(to, axis=-1)
+        half = (np.arcsin(np.clip(lamp_radius / d, 0.0, 1.0)) if is_sphere
+                else np.arctan(lamp_radius / d))
+        dirs, weights = cone_nodes(to, half, *nodes)
+        return dirs, radiance * weights
+
+    return _light_term(layout, specs, nodes_of)
 
 
 def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, nodes=(24, 48)):
