@@ -10,8 +10,8 @@ import time
 import numpy as np
 
 from . import optix
-from .config import (CONE_LIGHTS, MU_MIN_RMSE, SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_DIRECTION,
-                     SUN_STRENGTH, SUN_WORLD, TARGET)
+from .config import (CONE_LIGHTS, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP, SPOT_STRENGTH,
+                     SUN_ANGLE_DEG, SUN_DIRECTION, SUN_STRENGTH, SUN_WORLD, TARGET)
 from .plotting import SAMPLER_STYLE, _plt, to_display
 from .references import reference_image, relative_rmse
 from .rows import eval_is_fast, specs_for, twin
@@ -38,7 +38,7 @@ def rows_per_env(cfg, rows) -> dict:
         model_id, values = twin(row)
         if model_id not in fast:
             fast[model_id] = eval_is_fast(model_id, values)
-    return {e: [r for r in rows if e not in CONE_LIGHTS or fast[twin(r)[0]]] for e in cfg.envs}
+    return {e: [r for r in rows if e not in LAMP_ENVS or fast[twin(r)[0]]] for e in cfg.envs}
 
 
 def convergence(cfg, rows, tables, progress, sun_cal=None) -> dict:
@@ -140,7 +140,9 @@ def time_table(conv, rows) -> list:
 # -- plots -----------------------------------------------------------------------------------
 ENV_TITLES = {"white": "white furnace", "gradient": "smooth gradient",
               **{k: (f"sun lamp {a:g} deg" if kind == "lamp" else f"world spot {a:g} deg, no lamp")
-                 + " over dim world" for k, (kind, a) in CONE_LIGHTS.items()}}
+                 + " over dim world" for k, (kind, a) in CONE_LIGHTS.items()},
+              "point": f"point lamp r {POINT_LAMP['radius']:g} at {POINT_LAMP['height'] - 1:g} "
+                       "over dim world"}
 
 
 def _plot_env_curves(ax, series, rows, colors):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import grid
-from .config import CONE_LIGHTS, SUN_DIRECTION, SUN_WORLD
+from .config import LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
 
 
 def _table_key(spec):
@@ -138,18 +138,29 @@ def point_lamp_term(layout, specs, position, lamp_radius: float, radiance: float
 
 
 def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, nodes=(24, 48)):
-    """The reference of a grid under 'white', 'gradient' or a cone light of CONE_LIGHTS (then
-    `sun` = (radiance, half_angle)); returns (image, sun-quadrature error estimate or 0)."""
+    """The reference of a grid under 'white', 'gradient', a cone light of CONE_LIGHTS (then
+    `sun` = (radiance, half_angle)) or the point lamp; returns (image, the lamp quadrature's
+    error estimate or 0)."""
     from ..reference.quadrature import moments_at
 
     tabs = [None if s is None else tables.get(s) for s in specs]
-    if env_key not in CONE_LIGHTS:
+    if env_key not in LAMP_ENVS:
         return grid.reference_image(layout, tabs, grid.ENVIRONMENTS[env_key], moments_at), 0.0
     world = grid.Environment("sun world", SUN_WORLD)
     base = grid.reference_image(layout, tabs, world, moments_at)
-    radiance, half = sun
-    fine = sun_term(layout, specs, radiance, half, nodes)
-    coarse = sun_term(layout, specs, radiance, half, (nodes[0] // 2, nodes[1] // 2))
+    if env_key == "point":
+        from .scenes import point_radiance
+
+        def term(n):
+            return point_lamp_term(layout, specs, (0.0, 0.0, POINT_LAMP["height"]),
+                                   POINT_LAMP["radius"], point_radiance(), n)
+    else:
+        radiance, half = sun
+
+        def term(n):
+            return sun_term(layout, specs, radiance, half, n)
+    fine = term(nodes)
+    coarse = term((nodes[0] // 2, nodes[1] // 2))
     index, _, _ = layout.pixel_geometry()
     err = float(np.abs(fine - coarse)[index >= 0].max()) if (index >= 0).any() else 0.0
     return base + fine, err

@@ -8,7 +8,8 @@ import numpy as np
 
 from .. import grid
 from ..native import native_source
-from .config import CONE_LIGHTS, SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_STRENGTH, SUN_WORLD
+from .config import (CONE_LIGHTS, POINT_LAMP, SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_STRENGTH,
+                     SUN_WORLD)
 from .references import sun_unit
 
 
@@ -24,6 +25,26 @@ def add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG):
     obj.rotation_euler = mathutils.Vector(tuple(sun_unit())).to_track_quat("Z", "Y").to_euler()
     scene.collection.objects.link(obj)
     return obj
+
+
+def add_point_lamp(scene, position=(0.0, 0.0, POINT_LAMP["height"]),
+                   radius=POINT_LAMP["radius"], power=POINT_LAMP["power"]):
+    """A point lamp with Blender's defaults (Soft Falloff)."""
+    import bpy
+
+    light = bpy.data.lights.new("Microfacet Lab point", "POINT")
+    light.energy = power
+    light.shadow_soft_size = radius
+    obj = bpy.data.objects.new("Microfacet Lab point", light)
+    obj.location = position
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def point_radiance(power=POINT_LAMP["power"], radius=POINT_LAMP["radius"]) -> float:
+    """Cycles' point lamp radiance P / (4 pi^2 r^2) (scene/light.cpp: flux over the sphere's
+    area times 1/pi), uniform over the disk it shows."""
+    return power / (4.0 * math.pi ** 2 * radius ** 2)
 
 
 def env_for(env_key):
@@ -124,6 +145,8 @@ def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
         add_sun(scene, angle_deg=CONE_LIGHTS[env_key][1])
     elif env_key in CONE_LIGHTS:
         add_spot_world(scene, *cone_radiance(env_key, sun_cal))
+    elif env_key == "point":
+        add_point_lamp(scene)
     if device != "CPU":
         set_gpu(scene, device)
     scene.render.use_persistent_data = True

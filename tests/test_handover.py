@@ -1,0 +1,131 @@
+"""The lamps' hand-over to the shaders (addon/handover.py, addon/lamps.py; docs/light-sampling.md,
+"The residual's direct light"), headless Cycles with OSL.
+
+What this catches: a render that does not hand the lamps over without a user step (the
+render_pre handler), animated lamps handed over from a stale frame, bad lamp values (zero,
+negative, NaN, huge strength; zero size) that reach the shader or break the render, many lamps
+(100) that break the compile or the render, and aimed rays that ignore light linking (a lamp
+that lights none of the spheres must leave them exactly black, aimed or not)."""
+import math
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.render
+
+bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
+
+from addon import handover, shaders  # noqa: E402
+from addon.catalog import MODELS  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
+from addon.lab.grid import SphereSpec  # noqa: E402
+from addon.lab.report.scenes import add_point_lamp, add_sun  # noqa: E402
+
+BLACK = grid.Environment("black", 0.0)
+ROW = [SphereSpec("walter_reflection", {"roughness": 0.3}, "gold"),
+       SphereSpec("cook_torrance", {"roughness": 0.3, "specular": 1.0}, "Cook-Torrance"),
+       SphereSpec("walter_reflection", {"roughness": 0.5, "distribution": "beckmann"},
+                  "Beckmann")]
+LAYOUT = grid.GridLayout(rows=1, cols=len(ROW), cell_px=32, spacing=7.0)
+
+
+def _scene(samples=16):
+    scene = harness.new_scene()
+    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
+            for i, s in enumerate(ROW)]
+    harness.build_grid_scene(LAYOUT, mats, BLACK, samples, seed=2)
+    return scene
+
+
+def _lamp_count(model_id="walter_reflection") -> int:
+    text = bpy.data.texts[shaders.text_name(MODELS[model_id])].as_string()
+    line = next(l for l in text.splitlines() if l.startswith("#define MFL_LAMP_COUNT"))
+    return int(line.split()[-1])
+
+
+def test_a_plain_render_hands_the_lamps_over(tmp_path):
+    """F12 and `blender --background` go through render_pre: no harness, no user step."""
+    scene = _scene(4)
+    add_sun(scene, angle_deg=5.0)
+    assert _lamp_count() == 0
+    handover.register()
+    try:
+        scene.render.filepath = str(tmp_path / "plain.exr")
+        bpy.ops.render.render(write_still=True)
+    finally:
+        handover.unregister()
+    assert handover._on_render_pre not in bpy.app.handlers.render_pre
+    assert _lamp_count() == 1 and _lamp_count("cook_torrance") == 1
+    # The compiled bytecode is that of the text with the lamp (not the lamp-less first compile).
+    nodes = [n for t in bpy.data.node_groups for n in t.nodes if n.bl_idname == "ShaderNodeScript"]
+    assert nodes and all("lamp_datum" in n.bytecode for n in nodes
+                         if shaders.uses_lamps(MODELS[_model_of(n)]))
+
+
+def _model_of(node) -> str:
+    return next(m.id for m in MODELS.values() if node.script.name == shaders.text_name(m))
+
+
+def test_animated_lamps_are_read_at_the_frame_rendered():
+    scene = _scene()
+    sun = add_sun(scene, angle_deg=5.0)
+    sun.rotation_euler = (0.0, 0.0, 0.0)
+    sun.keyframe_insert("rotation_euler", frame=1)
+    sun.rotation_euler = (0.6, 0.0, 0.0)
+    sun.keyframe_insert("rotation_euler", frame=10)
+    axes = {}
+    for frame in (1, 10):
+        scene.frame_set(frame)
+        (record,) = handover.scene_lamps(scene)
+        axes[frame] = np.array(record.axis)
+    np.testing.assert_allclose(axes[1], [0.0, 0.0, 1.0], atol=1e-6)
+    np.testing.assert_allclose(axes[10], [0.0, -math.sin(0.6), math.cos(0.6)], atol=1e-6)
+
+
+def test_bad_lamp_values_never_reach_the_shader_nor_break_the_render():
+    scene = _scene()
+    add_point_lamp(scene, position=(0.0, 0.0, 6.0), radius=0.3, power=500.0)
+    for name, energy, radius in (("zero", 0.0, 0.3), ("negative", -50.0, 0.3),
+                                 ("nan", float("nan"), 0.3), ("huge", 1e6, 0.3),
+                                 ("zero size", 500.0, 0.0)):
+        add_point_lamp(scene, position=(3.0, 1.0, 5.0), radius=radius, power=energy).name = name
+    records = handover.scene_lamps(scene)
+    energies = sorted(o.data.energy for o in scene.objects if o.type == "LIGHT")
+    assert len(records) == 2, (records, energies)  # the good lamp and the huge one
+    assert all(math.isfinite(x) for r in records for x in r.floats())
+    assert max(r.power for r in records) <= 1e20
+    image, _ = harness.render(scene)
+    assert np.isfinite(image).all()
+    assert _lamp_count() == 2
+
+
+def test_a_hundred_lamps_compile_and_render():
+    scene = _scene(4)
+    for i in range(100):
+        a = 2 * math.pi * i / 100
+        add_point_lamp(scene, position=(12 * math.cos(a), 12 * math.sin(a), 4.0), radius=0.2,
+                       power=50.0 + i)
+    assert len(handover.scene_lamps(scene)) == 100
+    image, _ = harness.render(scene)
+    assert _lamp_count() == 100 and _lamp_count("cook_torrance") == 100
+    index, _, _ = LAYOUT.pixel_geometry()
+    assert np.isfinite(image).all() and image[..., :3][index >= 0].mean() > 0
+
+
+def test_light_linking_holds_for_aimed_rays():
+    """A sun linked to a collection holding no sphere lights none of them: exactly 0, while
+    the same sun unlinked lights all of them."""
+    scene = _scene(32)
+    sun = add_sun(scene, angle_deg=10.0)
+    dummy = bpy.data.objects.new("receiver", bpy.data.meshes.new("receiver"))
+    scene.collection.objects.link(dummy)
+    receivers = bpy.data.collections.new("receivers")
+    receivers.objects.link(dummy)
+    sun.light_linking.receiver_collection = receivers
+    linked, _ = harness.render(scene)
+    sun.light_linking.receiver_collection = None
+    unlinked, _ = harness.render(scene)
+    index, _, _ = LAYOUT.pixel_geometry()
+    assert float(linked[..., :3].max()) == 0.0
+    for i in range(len(ROW)):
+        assert unlinked[..., :3][index == i].mean() > 0, ROW[i].label
