@@ -5,8 +5,9 @@ material, rendered for the same wall time (Cycles' time limit).
 Pairs (ours from a shipped preset, native built from Cycles' nodes with the same numbers):
 gold (Walter GGX, conductor) / Metallic BSDF with the same n, k; rough glass (Walter GGX) /
 Glass BSDF; red plastic (Cook-Torrance) / Principled BSDF; rough Lee gold / Metallic BSDF with
-multiscatter GGX (a different model: the closest Cycles has). The Walter pairs also render with
-Light Sampling = Stochastic, the estimator the models had before the split.
+multiscatter GGX (a different model: the closest Cycles has). The models with a Light Sampling
+menu (Walter, Cook-Torrance) also render with Light Sampling = Stochastic, the estimator they had
+before the split.
 """
 from __future__ import annotations
 
@@ -148,7 +149,8 @@ def native_material(kind: str, values: dict):
 
 
 def pairs():
-    """(label, model id, our values, native kind, whether a Stochastic column is rendered)."""
+    """(label, model id, our values, native kind, whether a Stochastic column is rendered: the
+    models with a Light Sampling menu in the catalog)."""
     from .. import presets
 
     def preset(pid):
@@ -156,12 +158,13 @@ def pairs():
         return p.model_id, MODELS[p.model_id].resolve(p.params)
 
     rows = []
-    for pid, label, kind, stochastic in (
-            ("gold", "Gold: Walter GGX", "metallic", True),
-            ("rough_glass", "Rough glass: Walter GGX", "glass", True),
-            ("red_plastic", "Red plastic: Cook-Torrance", "principled", False),
-            ("rough_gold_lee", "Rough gold: Lee V-grooves", "metallic_multiscatter", False)):
+    for pid, label, kind in (
+            ("gold", "Gold: Walter GGX", "metallic"),
+            ("rough_glass", "Rough glass: Walter GGX", "glass"),
+            ("red_plastic", "Red plastic: Cook-Torrance", "principled"),
+            ("rough_gold_lee", "Rough gold: Lee V-grooves", "metallic_multiscatter")):
         model_id, values = preset(pid)
+        stochastic = any(p.id == "estimator" for p in MODELS[model_id].params)
         rows.append((label, model_id, values, kind, stochastic))
     return rows
 
@@ -194,7 +197,7 @@ def render_view(material, seconds: float, width: int, height: int, seed: int = 0
 
 def render_gallery(path, seconds: float = 5.0, width: int = 240, height: int = 180,
                    progress=print) -> list:
-    """Every pair (and the Stochastic estimator of the Walter models) for `seconds` each;
+    """Every pair (and the Stochastic estimator of the models that have one) for `seconds` each;
     writes a labelled PNG to `path`. Returns one dict per render: label, column, wall time,
     mean pixel value."""
     columns = ("ours, default (Native + Residual\nwhere the model has it)", "ours, Stochastic",
