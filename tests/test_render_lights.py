@@ -27,7 +27,7 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.report.references import point_lamp_term, sun_term, sun_unit  # noqa: E402
-from addon.lab.report.scenes import add_sun  # noqa: E402
+from addon.lab.report.scenes import add_point_lamp, add_sun, point_radiance  # noqa: E402
 
 SAMPLES = 256
 ROW = [
@@ -130,24 +130,30 @@ def test_shadowed_row_receives_nothing(sun_render):
     assert float(image[..., :3][shadowed].max()) == 0.0
 
 
-def _assert_bands_match(specs, image, reference, quad_err, rows_tested=1):
-    index, _, _ = LAYOUT.pixel_geometry()
-    ref = np.where((index >= len(specs))[..., None], image[..., :3], reference)
-    tested = [b for b in grid.band_stats(LAYOUT, image, ref) if b.sphere < len(specs)]
+def _assert_bands_match(layout, specs, image, reference, quad_err, power=None):
+    """Every band of the spheres with a spec within noise (Sidak over all bands) plus the
+    quadrature's error; with `power`, each sphere's brightest band resolves a bias of that
+    fraction. Returns the bands tested and the critical z."""
+    tested = [b for b in grid.band_stats(layout, image, reference) if b.sphere < len(specs)]
     z_crit = grid.sidak_z(3 * len(tested))
-    failures = []
-    for b in tested:
-        if (np.abs(b.bias) > z_crit * b.stderr + quad_err + grid.REFERENCE_ACCURACY).any():
-            failures.append(f"{specs[b.sphere].label} mu {b.band} side {b.side}: bias {b.bias} "
-                            f"stderr {b.stderr} reference {b.reference}")
+    failures = [f"{specs[b.sphere].label} mu {b.band} side {b.side}: bias {b.bias} stderr "
+                f"{b.stderr} reference {b.reference}" for b in tested
+                if (np.abs(b.bias) > z_crit * b.stderr + quad_err + grid.REFERENCE_ACCURACY).any()]
     assert not failures, f"z_crit {z_crit:.2f}, quadrature error {quad_err:.2e}:\n" + \
         "\n".join(failures)
+    for i, spec in enumerate(specs if power else ()):
+        bright = max((b for b in tested if b.sphere == i),
+                     key=lambda b: float(np.max(b.reference)))
+        assert float(np.max(bright.stderr)) * z_crit < power * float(np.max(bright.reference)), \
+            spec.label
     return tested, z_crit
 
 
 def test_lit_row_matches_the_sun_reference(sun_render):
     image, reference, quad_err = sun_render
-    tested, z_crit = _assert_bands_match(ROW, image, reference, quad_err)
+    index, _, _ = LAYOUT.pixel_geometry()
+    ref = np.where((index >= len(ROW))[..., None], image[..., :3], reference)
+    tested, z_crit = _assert_bands_match(LAYOUT, ROW, image, ref, quad_err)
     # Power: the noise must be small enough to see a 2% bias of the brightest band (the sun's
     # radiance convention, pi sin^2 h against 2 pi (1 - cos h), differs by 1.7% at 30 degrees).
     bright = max(tested, key=lambda b: float(np.max(b.reference)))
@@ -176,39 +182,39 @@ AIMED_ROW = [
 ]
 
 
-@pytest.fixture(scope="module")
-def small_sun_render():
+def _render_row(specs, add_light, seed):
+    """One row of `specs` over the black world, lit by `add_light(scene)`: (layout, image)."""
     scene = harness.new_scene()
     mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
-            for i, s in enumerate(AIMED_ROW)]
-    layout = grid.GridLayout(rows=1, cols=len(AIMED_ROW), cell_px=LAYOUT.cell_px,
+            for i, s in enumerate(specs)]
+    layout = grid.GridLayout(rows=1, cols=len(specs), cell_px=LAYOUT.cell_px,
                              spacing=LAYOUT.spacing)
-    harness.build_grid_scene(layout, mats, BLACK, AIMED_SAMPLES, seed=5)
-    add_sun(scene, strength=SUN_STRENGTH, angle_deg=SMALL_SUN_DEG)
+    harness.build_grid_scene(layout, mats, BLACK, AIMED_SAMPLES, seed=seed)
+    add_light(scene)
     image, _ = harness.render(scene)
+    return layout, image
+
+
+def _with_quadrature_error(layout, image, term, nodes):
+    fine, coarse = term(nodes), term((nodes[0] // 2, nodes[1] // 2))
+    return layout, image, fine, float(np.abs(fine - coarse).max())
+
+
+@pytest.fixture(scope="module")
+def small_sun_render():
+    layout, image = _render_row(AIMED_ROW, lambda scene: add_sun(
+        scene, strength=SUN_STRENGTH, angle_deg=SMALL_SUN_DEG), seed=5)
     half = math.radians(SMALL_SUN_DEG) / 2
     radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
-    fine = sun_term(layout, AIMED_ROW, radiance, half, (24, 48))
-    coarse = sun_term(layout, AIMED_ROW, radiance, half, (12, 24))
-    return layout, image, fine, float(np.abs(fine - coarse).max())
+    return _with_quadrature_error(layout, image, lambda n: sun_term(
+        layout, AIMED_ROW, radiance, half, n), (24, 48))
 
 
 def test_aimed_residual_matches_the_small_sun_reference(small_sun_render):
     layout, image, reference, quad_err = small_sun_render
-    tested = [b for b in grid.band_stats(layout, image, reference)]
-    z_crit = grid.sidak_z(3 * len(tested))
-    failures = [f"{AIMED_ROW[b.sphere].label} mu {b.band} side {b.side}: bias {b.bias} stderr "
-                f"{b.stderr} reference {b.reference}" for b in tested
-                if (np.abs(b.bias) > z_crit * b.stderr + quad_err + grid.REFERENCE_ACCURACY).any()]
-    assert not failures, f"z_crit {z_crit:.2f}, quadrature error {quad_err:.2e}:\n" + \
-        "\n".join(failures)
     # Power: every model's brightest band must resolve a 5% bias (unaimed, the Beckmann and
     # Cook-Torrance spheres' RMSE is 14-21 times higher at equal samples, measured).
-    for i, spec in enumerate(AIMED_ROW):
-        bright = max((b for b in tested if b.sphere == i),
-                     key=lambda b: float(np.max(b.reference)))
-        assert float(np.max(bright.stderr)) * z_crit < 0.05 * float(np.max(bright.reference)), \
-            spec.label
+    _assert_bands_match(layout, AIMED_ROW, image, reference, quad_err, power=0.05)
 
 
 # A point lamp with Blender's default Soft Falloff (Cycles makes it a disk of radius r facing the
@@ -227,42 +233,15 @@ POINT_ROW = AIMED_ROW[:3] + [
     SphereSpec("walter_reflection", {"roughness": 0.3, "fresnel_type": "conductor"}, "gold r0.3")]
 
 
-def add_point_lamp(scene):
-    light = bpy.data.lights.new("point", "POINT")
-    light.energy = POINT_POWER
-    light.shadow_soft_size = POINT_RADIUS
-    obj = bpy.data.objects.new("point", light)
-    obj.location = POINT_POSITION
-    scene.collection.objects.link(obj)
-
-
 @pytest.fixture(scope="module")
 def point_render():
-    scene = harness.new_scene()
-    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
-            for i, s in enumerate(POINT_ROW)]
-    layout = grid.GridLayout(rows=1, cols=len(POINT_ROW), cell_px=LAYOUT.cell_px,
-                             spacing=LAYOUT.spacing)
-    harness.build_grid_scene(layout, mats, BLACK, AIMED_SAMPLES, seed=7)
-    add_point_lamp(scene)
-    image, _ = harness.render(scene)
-    radiance = POINT_POWER / (4.0 * math.pi ** 2 * POINT_RADIUS ** 2)
-    fine = point_lamp_term(layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, (16, 32))
-    coarse = point_lamp_term(layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, (8, 16))
-    return layout, image, fine, float(np.abs(fine - coarse).max())
+    layout, image = _render_row(POINT_ROW, lambda scene: add_point_lamp(
+        scene, POINT_POSITION, POINT_RADIUS, POINT_POWER), seed=7)
+    radiance = point_radiance(POINT_POWER, POINT_RADIUS)
+    return _with_quadrature_error(layout, image, lambda n: point_lamp_term(
+        layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, n), (16, 32))
 
 
 def test_aimed_residual_matches_the_point_lamp_reference(point_render):
     layout, image, reference, quad_err = point_render
-    tested = grid.band_stats(layout, image, reference)
-    z_crit = grid.sidak_z(3 * len(tested))
-    failures = [f"{POINT_ROW[b.sphere].label} mu {b.band} side {b.side}: bias {b.bias} stderr "
-                f"{b.stderr} reference {b.reference}" for b in tested
-                if (np.abs(b.bias) > z_crit * b.stderr + quad_err + grid.REFERENCE_ACCURACY).any()]
-    assert not failures, f"z_crit {z_crit:.2f}, quadrature error {quad_err:.2e}:\n" + \
-        "\n".join(failures)
-    for i, spec in enumerate(POINT_ROW):
-        bright = max((b for b in tested if b.sphere == i),
-                     key=lambda b: float(np.max(b.reference)))
-        assert float(np.max(bright.stderr)) * z_crit < 0.05 * float(np.max(bright.reference)), \
-            spec.label
+    _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)
