@@ -64,11 +64,13 @@ def scene_lamps(scene, depsgraph=None) -> list:
     """LampRecords of the lamps `scene` renders that a reflected ray can meet (visible to glossy
     rays), at most lamps.MAX_LAMPS, brightest first. `depsgraph`: the evaluated state to read
     transforms and animated values from (the context's when None and available)."""
+    lights = [obj for obj in scene.objects if obj.type == "LIGHT" and not obj.hide_render
+              and getattr(obj, "visible_glossy", True)]
+    if not lights:
+        return []
     depsgraph = depsgraph or _depsgraph()
     records = []
-    for obj in scene.objects:
-        if obj.type != "LIGHT" or obj.hide_render or not getattr(obj, "visible_glossy", True):
-            continue
+    for obj in lights:
         record = _lamp_record(_evaluated(obj, depsgraph))
         if record is not None:
             records.append(record)

@@ -129,3 +129,38 @@ def test_light_linking_holds_for_aimed_rays():
     assert float(linked[..., :3].max()) == 0.0
     for i in range(len(ROW)):
         assert unlinked[..., :3][index == i].mean() > 0, ROW[i].label
+
+
+RENDER_SAVED = '''
+import sys
+blend, exr = sys.argv[1], sys.argv[2]
+import bpy
+if hasattr(bpy.utils, "expose_bundled_modules"):
+    bpy.utils.expose_bundled_modules()
+bpy.ops.wm.open_mainfile(filepath=blend)
+bpy.context.scene.render.filepath = exr
+bpy.ops.render.render(write_still=True)
+report({"foreign_modules": sorted(m for m in sys.modules if m == "addon"
+                                  or m.startswith("addon.") or "microfacet" in m.lower())})
+'''
+
+
+def test_a_saved_file_renders_the_same_without_the_add_on(tmp_path):
+    """The lamp table travels in the file (texts and bytecode): a fresh Blender that never
+    imports the add-on renders the same image (the residual still aimed at the lamps)."""
+    from bpy_helpers import run_bpy_script
+
+    from addon import compat
+
+    scene = _scene(16)
+    add_sun(scene, angle_deg=5.0)
+    add_point_lamp(scene, position=(2.0, -1.0, 5.0), radius=0.3, power=300.0)
+    here, _ = harness.render(scene, str(tmp_path / "here.exr"))
+    assert _lamp_count() == 2
+    blend = tmp_path / "lamps.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=False)
+    out = run_bpy_script(RENDER_SAVED, tmp_path, str(blend), str(tmp_path / "farm.exr"))
+    assert out["foreign_modules"] == [], out["_log"]
+    farm = compat.read_image(tmp_path / "farm.exr")
+    assert farm.shape == here.shape and here[..., :3].mean() > 0
+    assert np.abs(farm - here).max() < 1e-4

@@ -26,7 +26,8 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
-from addon.lab.report.references import point_lamp_term, sun_term, sun_unit  # noqa: E402
+from addon.lab.report.references import (area_lamp_term, point_lamp_term, sun_term,  # noqa: E402
+                                          sun_unit)
 from addon.lab.report.scenes import add_point_lamp, add_sun, point_radiance  # noqa: E402
 
 SAMPLES = 256
@@ -244,4 +245,42 @@ def point_render():
 
 def test_aimed_residual_matches_the_point_lamp_reference(point_render):
     layout, image, reference, quad_err = point_render
+    _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)
+
+
+# A rectangular area lamp, tilted, the residual aimed at it (uniform over its area): against the
+# numpy term over the rectangle (report/references.py area_lamp_term, radiance P / (pi A) on its
+# front side). What this catches: the area record's axes, size or facing handed over wrongly,
+# an area density (d^2 / (A cos)) that is not the one sampled, light from the back side.
+AREA_CENTRE = (-1.0, 0.5, 4.5)
+AREA_SIZE = (1.2, 0.6)
+AREA_ROTATION = (0.25, -0.2, 0.3)  # Euler XYZ, radians
+AREA_POWER = 600.0
+
+
+def add_area_lamp(scene):
+    light = bpy.data.lights.new("area", "AREA")
+    light.shape = "RECTANGLE"
+    light.size, light.size_y = AREA_SIZE
+    light.energy = AREA_POWER
+    obj = bpy.data.objects.new("area", light)
+    obj.location = AREA_CENTRE
+    obj.rotation_euler = AREA_ROTATION
+    scene.collection.objects.link(obj)
+
+
+@pytest.fixture(scope="module")
+def area_render():
+    import mathutils
+
+    layout, image = _render_row(POINT_ROW, add_area_lamp, seed=9)
+    rot = np.array(mathutils.Euler(AREA_ROTATION, "XYZ").to_matrix())
+    u, v = rot[:, 0] * AREA_SIZE[0] / 2, rot[:, 1] * AREA_SIZE[1] / 2
+    radiance = AREA_POWER / (math.pi * AREA_SIZE[0] * AREA_SIZE[1])
+    return _with_quadrature_error(layout, image, lambda n: area_lamp_term(
+        layout, POINT_ROW, AREA_CENTRE, u, v, radiance, n), (24, 24))
+
+
+def test_aimed_residual_matches_the_area_lamp_reference(area_render):
+    layout, image, reference, quad_err = area_render
     _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)

@@ -169,14 +169,11 @@ def pairs():
     return rows
 
 
-def render_view(material, seconds: float, width: int, height: int, seed: int = 0):
-    """One look-dev render of `material` on Suzanne for `seconds` of wall time."""
+def build_view(material, width: int, height: int, seed: int = 0):
+    """The look-dev scene with `material` on Suzanne (Blender's defaults otherwise: Clamp
+    Indirect 10, Filter Glossy 1, light tree; no denoiser, so the noise shows)."""
     scene = harness.new_scene()
-    # Blender's defaults otherwise (Clamp Indirect 10, Filter Glossy 1, light tree): what an
-    # artist renders with. No denoiser, so the noise shows.
     cycles = scene.cycles
-    cycles.samples = 1 << 16
-    cycles.time_limit = seconds
     cycles.use_adaptive_sampling = False
     cycles.use_denoising = False
     cycles.seed = seed
@@ -190,6 +187,14 @@ def render_view(material, seconds: float, width: int, height: int, seed: int = 0
     add_lamps(scene)
     add_camera(scene, width, height)
     add_suzanne(scene, material() if callable(material) else material)
+    return scene
+
+
+def render_view(material, seconds: float, width: int, height: int, seed: int = 0):
+    """One look-dev render of `material` on Suzanne for `seconds` of wall time."""
+    scene = build_view(material, width, height, seed)
+    scene.cycles.samples = 1 << 16
+    scene.cycles.time_limit = seconds
     harness.check_compiled()
     image, wall = harness.render(scene)
     return np.asarray(image), wall

@@ -27,7 +27,8 @@ POINT_LAMP["power"] = 4.0 * 3.141592653589793 * (POINT_LAMP["height"] - 1.0) ** 
 LAMP_ENVS = tuple(CONE_LIGHTS) + ("point",)  # lights whose reference is a numpy quadrature
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 CONVERGENCE_ROUGHNESS = (0.2, 0.5, 0.8)  # the spheres of each convergence row
-SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee")  # --sections
+# --sections
+SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee", "specialization")
 
 
 @dataclass

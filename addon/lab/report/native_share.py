@@ -56,13 +56,13 @@ def page(cfg, rows, res) -> list:
              "Share of the directional albedo carried by Cycles' native GGX closure in the "
              "Native + Residual estimator (`c E_ggx / E`, addon/lab/reference/split.py, "
              f"{data['samples']:,} Monte Carlo samples per entry; the largest standard error is "
-             "given per row). Per channel R/G/B where they differ. The residual, which finds "
-             "small lamps only by chance, carries the rest; models that are not split render "
-             "stochastically (docs/light-sampling.md).", "",
+             "given per row). Per channel R/G/B where they differ. The residual carries the "
+             "rest, its direction aimed partly at the lamps the add-on hands over; models that "
+             "are not split carry everything in it (docs/light-sampling.md).", "",
              f"| model | roughness | {head} | s.e. |", "|---|---|" + "---|" * len(data["thetas"]) + "---|"]
     for row in data["table"]:
         if row["share"] is None:
-            cells = ["0 (stochastic)"] * len(data["thetas"]) + ["-"]
+            cells = ["0 (all residual)"] * len(data["thetas"]) + ["-"]
         else:
             cells = [_fmt(s) for s in row["share"]] + [f"{np.max(row['stderr']):.1e}"]
         lines.append(f"| {row['case']} | {row['roughness']:g} | " + " | ".join(cells) + " |")

@@ -137,6 +137,28 @@ def point_lamp_term(layout, specs, position, lamp_radius: float, radiance: float
     return _light_term(layout, specs, nodes_of)
 
 
+def area_lamp_term(layout, specs, centre, u, v, radiance: float, nodes: tuple) -> np.ndarray:
+    """The same for a rectangular area lamp of uniform radiance (Cycles' area lamp: P / (pi A))
+    with centre c and half-extent axes u, v along the lamp's X and Y: Gauss-Legendre nodes over
+    the rectangle, d omega = cos_l dA / d^2, emitting on its front side only (the lamp's -Z,
+    -(u x v) normalized)."""
+    c, u, v = (np.asarray(x, dtype=float) for x in (centre, u, v))
+    normal = -np.cross(u, v) / np.linalg.norm(np.cross(u, v))
+    x, w = np.polynomial.legendre.leggauss(nodes[0])
+    s_, t_ = np.meshgrid(x, x, indexing="ij")
+    q = c + s_.reshape(-1, 1) * u + t_.reshape(-1, 1) * v  # (K, 3)
+    dA = (np.outer(w, w) * np.linalg.norm(np.cross(u, v))).reshape(-1)
+
+    def nodes_of(sel, points, normals):
+        to = q[None, :, :] - points[:, None, :]
+        d2 = np.sum(to * to, axis=-1)
+        dirs = to / np.sqrt(d2)[..., None]
+        cos_l = np.maximum(-dirs @ normal, 0.0)
+        return dirs, radiance * dA[None, :] * cos_l / d2
+
+    return _light_term(layout, specs, nodes_of)
+
+
 def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, nodes=(24, 48)):
     """The reference of a grid under 'white', 'gradient', a cone light of CONE_LIGHTS (then
     `sun` = (radiance, half_angle)) or the point lamp; returns (image, the lamp quadrature's
