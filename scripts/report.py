@@ -25,8 +25,10 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "report"), help="output folder")
     parser.add_argument("--figures", default=None,
                         help="copy the README figures here (default: docs/figures on a full run)")
-    parser.add_argument("--sections", default="convergence,samplers,refcost,stability,lee",
-                        help="comma-separated subset of convergence,samplers,refcost,stability,lee")
+    from addon.lab.report.config import SECTIONS
+
+    parser.add_argument("--sections", default=",".join(SECTIONS),
+                        help="comma-separated subset of " + ",".join(SECTIONS))
     args = parser.parse_args(argv)
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
     figures = args.figures or (str(ROOT / "docs" / "figures") if mode == "full" else None)

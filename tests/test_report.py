@@ -52,6 +52,10 @@ def test_smoke_page_states_machine_versions_and_numbers(smoke):
     assert re.search(r"\| \*\*all\*\* \| \d+ \| [0-9,]+ \| \*\*\d+\*\* \| \*\*\d+\*\* \|", page)
     for table in ("| order N |", "| sphere, sampler | max pixel |", "var / max at"):
         assert table in page
+    # Specialization: both variants timed, memory read from Cycles, unused groups removed.
+    spec = [line for line in page.splitlines() if line.startswith("| gold (Walter GGX) |")]
+    assert len(spec) == 1 and re.search(rf"\| {NUMBER} s \| {NUMBER} s \| {NUMBER} \| "
+                                        rf"{NUMBER} \| {NUMBER} \| 4 / 1 \|$", spec[0]), spec
 
 
 @pytest.mark.render

@@ -22,12 +22,13 @@ from ...catalog import MODELS
 # (label, preset): a material without transmission (where specialization can zero a kind of
 # bounce) and one with it.
 CASES = (("gold (Walter GGX)", "gold"), ("rough glass (Walter GGX)", "rough_glass"))
-_PEAK = re.compile(r"Peak[: ]+([0-9.]+)\s*([KMG])", re.I)
+# Cycles' render statistics read "Mem: 66M | Sample 4/16" (some versions add "Peak: ...").
+_PEAK = re.compile(r"(?:Mem|Peak)[: ]+([0-9.]+)\s*([KMG])", re.I)
 _UNIT = {"K": 1.0 / 1024.0, "M": 1.0, "G": 1024.0}
 
 
 def _peak_mib(stats: list) -> float:
-    """The largest peak memory Cycles reported in its render statistics, MiB (nan if none)."""
+    """The largest memory Cycles reported in its render statistics, MiB (nan if none)."""
     peaks = [float(m.group(1)) * _UNIT[m.group(2).upper()] for s in stats
              for m in _PEAK.finditer(s)]
     return max(peaks) if peaks else float("nan")
@@ -63,7 +64,8 @@ def _render(case_preset, specialized: bool, samples: int, size: tuple):
 
 
 def compute(cfg, rows, tables, progress, notes, out) -> dict:
-    samples, size, repeats = (64, (240, 180), 3) if cfg.mode == "full" else (16, (160, 120), 2)
+    samples, size, repeats = {"full": (64, (240, 180), 3), "quick": (16, (160, 120), 2)}.get(
+        cfg.mode, (4, (48, 36), 1))
     results = []
     for label, preset in CASES:
         runs = {False: [], True: []}
