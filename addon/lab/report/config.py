@@ -24,7 +24,11 @@ SPOT_STRENGTH = 1.0
 # distance of the spheres' tops below it.
 POINT_LAMP = {"height": 6.0, "radius": 0.25}
 POINT_LAMP["power"] = 4.0 * 3.141592653589793 * (POINT_LAMP["height"] - 1.0) ** 2
-LAMP_ENVS = tuple(CONE_LIGHTS) + ("point",)  # lights whose reference is a numpy quadrature
+# "area": a rectangular area lamp (1 x 0.5, tilted 0.3 rad about x) at the same height, its
+# power for about the same irradiance below it.
+AREA_LAMP = {"height": 6.0, "size": (1.0, 0.5), "tilt": 0.3}
+AREA_LAMP["power"] = 3.141592653589793 * (AREA_LAMP["height"] - 1.0) ** 2
+LAMP_ENVS = tuple(CONE_LIGHTS) + ("point", "area")  # lights with a numpy quadrature reference
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 CONVERGENCE_ROUGHNESS = (0.2, 0.5, 0.8)  # the spheres of each convergence row
 # --sections
@@ -79,13 +83,15 @@ def config(mode: str) -> Config:
     theta_full = tuple(np.round(np.concatenate([np.linspace(0, 80, 9), [84, 87, 88.5, 89.5, 89.9]]), 3))
     if mode == "full":
         return Config("full", tuple(2 ** k for k in range(11)), 20, CONVERGENCE_ROUGHNESS,
-                      ("white", "gradient", "sun", "sun05", "spot", "point"), 1, 1024, "full",
+                      ("white", "gradient", "sun", "sun05", "spot", "point", "area"), 1, 1024,
+                      "full",
                       40000,
                       theta_full,
                       (0.1, 0.3, 0.6, 1.0), 96, (2, 3, 4, 6, 8), 14, 32, (24, 48))
     if mode == "quick":
         return Config("quick", (1, 4, 16, 64, 256), 16, CONVERGENCE_ROUGHNESS,
-                      ("white", "gradient", "sun", "sun05", "spot", "point"), 8, 256, "quick",
+                      ("white", "gradient", "sun", "sun05", "spot", "point", "area"), 8, 256,
+                      "quick",
                       8000,
                       (0.0, 30.0, 60.0, 80.0, 87.0, 89.0, 89.9), (0.1, 0.3, 1.0), 64,
                       (2, 4, 6), 10, 16, (16, 32), combo_seconds=5.0, model_seconds=30.0,

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from . import optix
-from .config import (CONE_LIGHTS, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP, SPOT_STRENGTH,
+from .config import (AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP, SPOT_STRENGTH,
                      SUN_ANGLE_DEG, SUN_DIRECTION, SUN_STRENGTH, SUN_WORLD, TARGET)
 from .plotting import SAMPLER_STYLE, _plt, to_display
 from .references import reference_image, relative_rmse
@@ -142,7 +142,8 @@ ENV_TITLES = {"white": "white furnace", "gradient": "smooth gradient",
               **{k: (f"sun lamp {a:g} deg" if kind == "lamp" else f"world spot {a:g} deg, no lamp")
                  + " over dim world" for k, (kind, a) in CONE_LIGHTS.items()},
               "point": f"point lamp r {POINT_LAMP['radius']:g} at {POINT_LAMP['height'] - 1:g} "
-                       "over dim world"}
+                       "over dim world",
+              "area": "area lamp {:g} x {:g} over dim world".format(*AREA_LAMP["size"])}
 
 
 def _plot_env_curves(ax, series, rows, colors):

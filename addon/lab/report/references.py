@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import grid
-from .config import LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
+from .config import AREA_LAMP, LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
 
 
 def _table_key(spec):
@@ -176,6 +176,14 @@ def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, n
         def term(n):
             return point_lamp_term(layout, specs, (0.0, 0.0, POINT_LAMP["height"]),
                                    POINT_LAMP["radius"], point_radiance(), n)
+    elif env_key == "area":
+        from .scenes import area_lamp_axes
+
+        sx, sy = AREA_LAMP["size"]
+        radiance = AREA_LAMP["power"] / (np.pi * sx * sy)
+
+        def term(n):
+            return area_lamp_term(layout, specs, *area_lamp_axes(), radiance, (n[0], n[0]))
     else:
         radiance, half = sun
 

@@ -8,8 +8,8 @@ import numpy as np
 
 from .. import grid
 from ..native import native_source
-from .config import (CONE_LIGHTS, POINT_LAMP, SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_STRENGTH,
-                     SUN_WORLD)
+from .config import (AREA_LAMP, CONE_LIGHTS, POINT_LAMP, SPOT_STRENGTH, SUN_ANGLE_DEG,
+                     SUN_STRENGTH, SUN_WORLD)
 from .references import sun_unit
 
 
@@ -37,6 +37,28 @@ def add_point_lamp(scene, position=(0.0, 0.0, POINT_LAMP["height"]),
     light.shadow_soft_size = radius
     obj = bpy.data.objects.new("Microfacet Lab point", light)
     obj.location = position
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def area_lamp_axes():
+    """(centre, u, v) of the report's area lamp: half-extents along its X and Y, world space."""
+    c, s = math.cos(AREA_LAMP["tilt"]), math.sin(AREA_LAMP["tilt"])
+    sx, sy = AREA_LAMP["size"]
+    return ((0.0, 0.0, AREA_LAMP["height"]), (0.5 * sx, 0.0, 0.0), (0.0, 0.5 * sy * c, 0.5 * sy * s))
+
+
+def add_area_lamp(scene):
+    """A rectangular area lamp (Cycles: radiance P / (pi A) on its front, the lamp's -Z)."""
+    import bpy
+
+    light = bpy.data.lights.new("Microfacet Lab area", "AREA")
+    light.shape = "RECTANGLE"
+    light.size, light.size_y = AREA_LAMP["size"]
+    light.energy = AREA_LAMP["power"]
+    obj = bpy.data.objects.new("Microfacet Lab area", light)
+    obj.location = area_lamp_axes()[0]
+    obj.rotation_euler = (AREA_LAMP["tilt"], 0.0, 0.0)
     scene.collection.objects.link(obj)
     return obj
 
@@ -147,6 +169,8 @@ def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
         add_spot_world(scene, *cone_radiance(env_key, sun_cal))
     elif env_key == "point":
         add_point_lamp(scene)
+    elif env_key == "area":
+        add_area_lamp(scene)
     if device != "CPU":
         set_gpu(scene, device)
     scene.render.use_persistent_data = True
