@@ -129,3 +129,11 @@ def write_png(path, rgb) -> None:
         image.save()
     finally:
         bpy.data.images.remove(image)
+
+
+def set_multilayer_exr(image_settings) -> None:
+    """Write every pass to one multilayer OpenEXR: a media type from Blender 5.0, a file format
+    before."""
+    if "media_type" in image_settings.bl_rna.properties:
+        image_settings.media_type = "MULTI_LAYER_IMAGE"  # its one format: OPEN_EXR_MULTILAYER
+    image_settings.file_format = "OPEN_EXR_MULTILAYER"

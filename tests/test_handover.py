@@ -164,3 +164,43 @@ def test_a_saved_file_renders_the_same_without_the_add_on(tmp_path):
     farm = compat.read_image(tmp_path / "farm.exr")
     assert farm.shape == here.shape and here[..., :3].mean() > 0
     assert np.abs(farm - here).max() < 1e-4
+
+
+def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
+    """Render passes: an artist expects a glossy BSDF's light in Glossy Direct / Indirect (times
+    Glossy Color), none in Emission. Both parts are ordinary closures (no emission() is used),
+    so Combined must be the glossy passes' sum here (black world, a sun, metals only)."""
+    from addon import compat
+
+    if not compat.has_openimageio():
+        pytest.skip("reading a multilayer EXR needs the OpenImageIO bundled with bpy (5.0+)")
+    import OpenImageIO as oiio
+
+    scene = _scene(32)
+    add_sun(scene, angle_deg=10.0)
+    layer = scene.view_layers[0]
+    for name in ("use_pass_glossy_direct", "use_pass_glossy_indirect", "use_pass_glossy_color",
+                 "use_pass_emit"):
+        setattr(layer, name, True)
+    compat.set_multilayer_exr(scene.render.image_settings)
+    path = tmp_path / "passes.exr"
+    handover.hand_over(scene)
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    channels = {}  # every channel of every part (OpenEXR writes the passes as parts)
+    for part in range(oiio.ImageBuf(str(path)).nsubimages):
+        buf = oiio.ImageBuf(str(path), part, 0)
+        pixels = np.asarray(buf.get_pixels(oiio.FLOAT), dtype=np.float64)
+        for i, name in enumerate(buf.spec().channelnames):
+            channels[name] = pixels[..., i]
+
+    def rgb(pass_name):
+        return np.stack([next(v for n, v in channels.items() if n.endswith(f"{pass_name}.{c}"))
+                         for c in "RGB"], -1)
+
+    combined, emit = rgb("Combined"), rgb("Emission")
+    glossy = (rgb("Glossy Direct") + rgb("Glossy Indirect")) * rgb("Glossy Color")
+    assert float(np.abs(emit).max()) == 0.0
+    assert combined.sum() > 0
+    assert abs(glossy.sum() - combined.sum()) <= 1e-4 * combined.sum()
+    assert float(np.abs(glossy - combined).max()) <= 1e-4 * float(combined.max())
