@@ -203,3 +203,21 @@ def test_sun_cone_rule_integrates_the_solid_angle_and_a_cosine():
     # integral of (w.d)^2 over the cone = 2 pi (1 - cos^3) / 3
     assert (w * (dirs @ d) ** 2).sum() == pytest.approx(2 * math.pi * (1 - math.cos(half) ** 3) / 3,
                                                         rel=1e-10)
+
+
+@pytest.mark.render
+def test_smoke_comparisons_keep_energy_where_the_models_do(smoke):
+    """The seed's figures 21-23 in numpy: in the white furnace Lee's grooves (both shapes) and
+    Heitz 2016's walk keep all the energy, single scattering loses some at roughness 0.5; for
+    gold every model reflects less than in the furnace."""
+    out, _ = smoke
+    curves = json.loads((out / "results.json").read_text())["comparisons"]["curves"]
+    by = {(c["fresnel"], c["model"]): np.asarray(c["albedo"]) for c in curves}
+    for model in ("Lee symmetric", "Lee asymmetric", "Heitz 2016"):
+        np.testing.assert_allclose(by[("none", model)], 1.0, atol=1e-6)
+    for model in ("Walter single (GGX)", "Cook-Torrance single (Beckmann, V-cavity)"):
+        assert by[("none", model)].min() < 0.99, model
+    for (fresnel, model), albedo in by.items():
+        if fresnel == "conductor":
+            assert np.all(albedo < by[("none", model)] + 1e-9), model
+    assert (out / "multiple_scattering.png").stat().st_size > 10_000

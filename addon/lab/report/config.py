@@ -32,7 +32,8 @@ LAMP_ENVS = tuple(CONE_LIGHTS) + ("point", "area")  # lights with a numpy quadra
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 CONVERGENCE_ROUGHNESS = (0.2, 0.5, 0.8)  # the spheres of each convergence row
 # --sections
-SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee", "specialization")
+SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee", "specialization",
+            "comparisons")
 
 
 @dataclass
