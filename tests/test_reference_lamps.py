@@ -228,3 +228,37 @@ def test_osl_constants_are_the_numpy_ones():
         lamps.GUIDE_FRACTION
     for i, kind in enumerate(records_mod.KINDS):
         assert re.search(rf"#define MFL_LAMP_{kind.upper()} {i}\b", src), kind
+
+
+def test_guided_weights_stay_finite_and_non_negative_on_extreme_inputs():
+    """The stiff corners: near-mirror and full roughness, grazing incidence (wi.z down to
+    1e-6), extreme IOR, N and K, every sampler, Beckmann and Cook-Torrance, lamps tiny (a
+    0.001-degree sun), huge and very close; the aimed weight and the choice's model share stay
+    finite, the weight >= 0, the share in [0, 1]."""
+    from tests.test_reference_split import random_values
+
+    rng = np.random.default_rng(12)
+    tiny_sun = records_mod.sun_record((0.2, -0.1, 1.0), math.radians(1e-3), 1.0)
+    close = records_mod.sphere_record((0.3, -0.2, 0.05), 0.04, 1e20, is_sphere=True)
+    lamps_sets = [LAMPS, [tiny_sun], [close, DISK], [tiny_sun, close, RECT]]
+    for i in range(120):
+        model_id = ("walter_reflection", "cook_torrance")[i % 2]
+        values = random_values(rng, "walter_reflection") if model_id == "walter_reflection" \
+            else {"roughness": float(rng.uniform(0.0, 1.0)), "specular": 1.0}
+        values["roughness"] = float(rng.choice([values["roughness"], 1e-3, 0.0316, 1.0]))
+        values["sampler"] = str(rng.choice(["dcos", "vndf"] if model_id != "cook_torrance"
+                                           else ["dcos", "vndf", "vcavity"]))
+        if model_id == "walter_reflection":
+            values["distribution"] = str(rng.choice(["ggx", "beckmann"]))
+        bsdf = make_bsdf(model_id, values)
+        n = 400
+        wi = normalize(rng.normal(size=(n, 3)))
+        wi[:, 2] = np.abs(wi[:, 2])
+        wi[: n // 4, 2] = 10.0 ** rng.uniform(-6, -2, n // 4)
+        wi = normalize(wi)
+        with np.errstate(all="ignore"):
+            _, w, share = lamps.sample_guided_residual(
+                bsdf, lamps_sets[i % len(lamps_sets)], np.broadcast_to(P0, (n, 3)), wi,
+                rng.random((n, 7)))
+        assert np.all(np.isfinite(w)) and np.all(w >= 0.0), values
+        assert np.all(np.isfinite(share)) and np.all((share >= 0) & (share <= 1 + 1e-12)), values
