@@ -15,10 +15,11 @@ COMPAT ?= 4.2 4.5 5.0
 # The compatibility suite: install the zip, build every node group and check it compiled, apply
 # and render every preset, a white-furnace sphere against the numpy reference, the CLI; the
 # node sockets, preset operator, scene specialization, a saved .blend rendered without the
-# add-on, and the report's smoke run.
+# add-on, the report's smoke run, and the lamps: their hand-over and the residual aimed at them
+# against numpy under a sun, a point and an area lamp.
 COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py \
 	tests/test_harness.py tests/test_nodes.py tests/test_presets.py tests/test_specialize.py \
-	tests/test_portability.py tests/test_report.py
+	tests/test_portability.py tests/test_report.py tests/test_handover.py tests/test_render_lights.py
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace clean
 

@@ -194,12 +194,14 @@ def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
         for i, name in enumerate(buf.spec().channelnames):
             channels[name] = pixels[..., i]
 
-    def rgb(pass_name):
-        return np.stack([next(v for n, v in channels.items() if n.endswith(f"{pass_name}.{c}"))
+    def rgb(*pass_names):  # Blender 5 writes "Glossy Direct", 4.x "GlossDir"
+        return np.stack([next(v for n, v in channels.items()
+                              if any(n.endswith(f".{p}.{c}") for p in pass_names))
                          for c in "RGB"], -1)
 
-    combined, emit = rgb("Combined"), rgb("Emission")
-    glossy = (rgb("Glossy Direct") + rgb("Glossy Indirect")) * rgb("Glossy Color")
+    combined, emit = rgb("Combined"), rgb("Emission", "Emit")
+    glossy = ((rgb("Glossy Direct", "GlossDir") + rgb("Glossy Indirect", "GlossInd"))
+              * rgb("Glossy Color", "GlossCol"))
     assert float(np.abs(emit).max()) == 0.0
     assert combined.sum() > 0
     assert abs(glossy.sum() - combined.sum()) <= 1e-4 * combined.sum()
