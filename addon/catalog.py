@@ -342,6 +342,42 @@ LEE_VGROOVE = _add(Model(
 ))
 
 
+# Formulas: docs/models.md, sec. 5, and docs/multiple-scattering.md.
+HEITZ2016 = _add(Model(
+    id="heitz2016",
+    label="Microfacet Multiple Scattering (Heitz 2016)",
+    year=2016,
+    shader="heitz2016",
+    tags=("glossy", "transmission", "transparent"),
+    doc="Heitz et al. (2016) multiple scattering: light may bounce several times on the "
+        "microsurface before it leaves, so rough metals and rough glass keep their brightness "
+        "instead of turning dark; with no Fresnel it loses no energy at any roughness.",
+    params=(
+        # Multiplies the whole walk's weight (both lobes of the glass): not a specular-only tint.
+        Param("base_color", "Tint", COLOR, (1.0, 1.0, 1.0), 0.0, 1.0,
+              doc="Colours all the light the surface sends back (and, as glass, lets through); "
+                  "white is physically correct."),
+        ROUGHNESS,
+        Param("distribution", "Distribution", ENUM, "ggx", items=ENUMS["distribution"],
+              doc=DISTRIBUTION_DOC),
+        Param("fresnel_type", "Fresnel", ENUM, "conductor", items=ENUMS["fresnel_type"],
+              doc="What the surface is made of: Conductor for metals (set by N and K), "
+                  "coloured again at every bounce; Dielectric for rough glass (set by IOR), "
+                  "which reflects or refracts at every bounce and lets light through; None "
+                  "reflects everything and loses no energy."),
+        Param("ior", "IOR", FLOAT, 1.5, 0.01, 100.0,
+              doc="Index of refraction of the glass (1.33 water, 1.5 glass, 2.42 diamond): "
+                  "higher values bend light more and reflect more; 1 makes the surface "
+                  "invisible. Used when Fresnel is Dielectric."),
+        CONDUCTOR_N, CONDUCTOR_K,
+        Param("max_order", "Max Bounces", FLOAT, 100.0, 1.0, 1000.0,
+              doc="How many bounces on the microsurface light may make before it is given up "
+                  "(that light is lost, so low values darken rough surfaces): 1 is single "
+                  "scattering; at 100 less than 1 in 100,000 paths is lost."),
+    ),
+))
+
+
 def alphas(roughness: float, anisotropy: float = 0.0) -> tuple[float, float]:
     """Cycles' mapping from (roughness, anisotropy) to (alpha_x, alpha_y)."""
     a = roughness * roughness

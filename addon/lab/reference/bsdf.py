@@ -14,6 +14,8 @@ pbrt-v4), and `delta_reflectance(wi)` gives its reflectance for the quadrature.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ...catalog import MODELS, alphas
@@ -176,4 +178,18 @@ def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
                        fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"],
                        k=params["k"], tint=params["base_color"],
                        max_bounces_param=params["max_bounces"])
+    if model_id == "heitz2016":
+        # Heitz et al. 2016 random walk (addon/lab/reference/heitz2016.py).
+        from .heitz2016 import HeitzBSDF, HeitzConductor, HeitzDielectric
+
+        ax, _ = alphas(params["roughness"])
+        mf = Microfacet(params["distribution"], ax, ax)
+        if params["fresnel_type"] == "dielectric":
+            # As the shader renders it: Cycles' refraction closure cannot return forward transmission.
+            walk = HeitzDielectric(mf, params["ior"], tint=params["base_color"],
+                                   forward_transmission=False)
+        else:
+            walk = HeitzConductor(mf, params["fresnel_type"], n=params["n"], k=params["k"],
+                                  tint=params["base_color"])
+        return HeitzBSDF(walk, max_order=int(math.floor(params["max_order"] + 0.5)))
     raise KeyError(f"no reference implementation for model {model_id!r}")

@@ -601,10 +601,37 @@ class HeitzDielectric(_SmithWalk):
     dielectric = True
     has_transmission = True
 
-    def __init__(self, mf: Microfacet, ior: float = 1.5, tint=(1.0, 1.0, 1.0)):
+    def __init__(self, mf: Microfacet, ior: float = 1.5, tint=(1.0, 1.0, 1.0),
+                 forward_transmission: bool = True):
         super().__init__(mf, tint)
         self.eta = float(ior)
         self.ior = self.eta
+        self.forward_transmission = forward_transmission
+
+    @staticmethod
+    def is_forward(wi, wo):
+        """Transmitted directions with wi.wo >= 0 ("forward" through the interface), which a
+        multiple-scattering walk reaches but no refraction can: for any eta > 0 a refraction
+        has wi.wo = (cos_i^2 - 1) / eta - cos_i |cos_t| < 0 (Walter 2007 eq. 40). Cycles'
+        refraction closure cannot return them, so osl/heitz2016.osl drops them (weight 0);
+        forward_transmission=False does the same here (docs/multiple-scattering.md measures
+        the share)."""
+        wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
+        return (wo[:, 2] < 0.0) & (dot(wi, wo) >= 0.0)
+
+    def sample(self, wi, rng, max_order: int = MAX_ORDER) -> WalkSample:
+        s = super().sample(wi, rng, max_order)
+        if self.forward_transmission:
+            return s
+        keep = ~self.is_forward(wi, s.wo)
+        return s._replace(weight=s.weight * keep[:, None])
+
+    def eval(self, wi, wo, rng, max_order: int = MAX_ORDER, order: int | None = None,
+             bidirectional: bool = False):
+        est = super().eval(wi, wo, rng, max_order, order, bidirectional)
+        if self.forward_transmission:
+            return est
+        return est * ~self.is_forward(wi, wo)[:, None]
 
     def __repr__(self):
         return f"HeitzDielectric({self.mf!r}, eta={self.eta:g})"
@@ -646,7 +673,7 @@ class HeitzDielectric(_SmithWalk):
             out[refl] = r * (wo[refl, 2] / wi[refl, 2])[:, None]
         t = ~refl
         if t.any():
-            other = HeitzDielectric(self.mf, 1.0 / self.eta, self.tint)
+            other = HeitzDielectric(self.mf, 1.0 / self.eta, self.tint)  # full walk: the pair is masked after
             r = other._walk(flip(wo[t]), rng, max_order, wo=flip(wi[t]), order=order)[1]
             out[t] = self.eta ** 2 * r * (np.abs(wo[t, 2]) / wi[t, 2])[:, None]
         return out
@@ -701,3 +728,100 @@ def directional_moments_mc(bsdf: _SmithWalk, mu, n_walks: int, rng,
             out[j][i], out[j + 3][i] = _mean_se(x)
         lost[i] = int(smp.lost.sum())
     return MCMoments(*out, lost)
+
+
+# -- the catalog model ------------------------------------------------------------------------
+class _PreparedStream:
+    """An rng for `_SmithWalk`: the first draw (the first event's four numbers, rows of the
+    walks that start) comes from prepared uniforms, every later one from a seeded Generator."""
+
+    def __init__(self, first, seed: int):
+        self.first = first
+        self.rest = np.random.default_rng(seed)
+
+    def random(self, shape):
+        if self.first is not None and tuple(shape) == self.first.shape:
+            out, self.first = self.first, None
+            return out
+        return self.rest.random(shape)
+
+
+class HeitzBSDF:
+    """The catalog model `heitz2016` (make_bsdf) in the interface the lab's tools use: a
+    conductor or dielectric walk (`walk`) with `max_order` events, and
+      eval(wi, wo), eval_cos(wi, wo): Monte Carlo estimates (mean of `eval_walks` walks from a
+        fixed seed) of f and f |cos_o|: the walk has no closed form;
+      sample(wi, u): one walk per row, u (N, >= 4) the first event's uniforms (height, visible
+        normal, Fresnel choice), later events from a seed derived from u; returns (wo, weight,
+        pdf) with pdf a one-walk estimate of the density of wo (that of the F = 1 walk for a
+        conductor, the walk's own for a dielectric, whose weights are 1);
+      directional_moments(mu): (E, Vn, Vt) from `moment_walks` sampled walks per mu (Monte
+        Carlo; `moment_tables` gives them with their standard errors)."""
+
+    diffuse_albedo = np.zeros(3)
+
+    def __init__(self, walk: _SmithWalk, max_order: int = MAX_ORDER, eval_walks: int = 16,
+                 moment_walks: int = 200_000, seed: int = 0):
+        self.walk = walk
+        self.mf = walk.mf
+        self.max_order = int(max_order)
+        self.eval_walks = eval_walks
+        self.moment_walks = moment_walks
+        self.seed = seed
+        self.has_transmission = walk.has_transmission
+        self.is_delta = walk.mf.delta
+        if walk.dielectric:
+            self._density = walk
+        else:
+            self._density = HeitzConductor(walk.mf, "none")
+
+    def __repr__(self):
+        return f"HeitzBSDF({self.walk!r}, max_order={self.max_order})"
+
+    def eval_cos(self, wi, wo):
+        lead = np.broadcast_shapes(np.shape(wi), np.shape(wo))[:-1]
+        wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
+        mean, _ = self.walk.eval_mean(wi, wo, self.eval_walks, np.random.default_rng(self.seed),
+                                      self.max_order)
+        return mean.reshape(lead + (3,))
+
+    def eval(self, wi, wo):
+        cos_o = np.abs(np.asarray(wo, dtype=float)[..., 2:3])
+        fc = self.eval_cos(wi, wo)
+        return np.where(cos_o > 0.0, fc / np.where(cos_o > 0.0, cos_o, 1.0), 0.0)
+
+    def sample(self, wi, u):
+        lead = np.shape(wi)[:-1]  # any (..., 3), as the other models
+        wi = _rows(wi)
+        u = np.asarray(u, dtype=float).reshape(len(wi), -1)
+        if u.shape[1] < 4:
+            raise IndexError("the walk's first event takes 4 uniforms")
+        first = np.clip(u[wi[:, 2] > 0.0, :4], 0.0, 1.0 - 2.0 ** -53)
+        seed = int(np.frombuffer(np.ascontiguousarray(u).tobytes(), dtype=np.uint64).sum()
+                   % (2 ** 63)) if u.size else 0
+        s = self.walk.sample(wi, _PreparedStream(first, seed), self.max_order)
+        live = s.weight.max(axis=1) > 0.0
+        pdf = np.zeros(len(wi))
+        if live.any():
+            est = self._density.eval(wi[live], s.wo[live], np.random.default_rng(seed + 1),
+                                     self.max_order)
+            pdf[live] = est[:, 0] / np.maximum(np.abs(s.wo[live, 2]), _TINY)
+        return s.wo.reshape(lead + (3,)), s.weight.reshape(lead + (3,)), pdf.reshape(lead)
+
+    def directional_moments(self, mu):
+        m = directional_moments_mc(self.walk, mu, self.moment_walks,
+                                   np.random.default_rng(self.seed), self.max_order)
+        return m.E, m.Vn, m.Vt
+
+
+def moment_tables(bsdf: HeitzBSDF, n_mu: int, n_walks: int, rng):
+    """Moment tables of the walk for the sphere-grid reference, with their Monte Carlo error:
+    (table, se_table), two quadrature.MomentTable on the same n_mu nodes (uniform in log mu),
+    the second holding the standard errors of E, Vn and Vt (moments_at on it interpolates the
+    errors, which is what a reference pixel's error is up to the interpolation weights)."""
+    from .quadrature import MU_MIN, MomentTable, _merge, _node_mu
+
+    x = np.linspace(np.log(MU_MIN), 0.0, max(int(n_mu), 4))
+    m = directional_moments_mc(bsdf.walk, _node_mu(x), n_walks, rng, bsdf.max_order)
+    empty = MomentTable(np.zeros(0), *(np.zeros((0, 3)),) * 3)
+    return _merge(empty, x, (m.E, m.Vn, m.Vt)), _merge(empty, x, (m.E_se, m.Vn_se, m.Vt_se))
