@@ -145,6 +145,30 @@ def reference_image(layout: GridLayout, tables: list, env: Environment, moments_
     return image
 
 
+def reference_error_image(layout: GridLayout, error_tables: list, env: Environment,
+                          moments_at) -> np.ndarray:
+    """Bound on each reference pixel's error when the moment tables are Monte Carlo estimates
+    (the Heitz 2016 walk): error_tables[i] holds the standard errors of sphere i's (E, Vn, Vt)
+    (heitz2016.moment_tables), and a pixel's error is at most
+    constant SE_E + |gradient| (SE_Vn |n.d| + SE_Vt |t.d|) (its moments' errors added in
+    magnitude; interpolation weights near 1). Neighbouring pixels share table nodes, so a band
+    mean's reference error is the mean of this image over the band, not less. 0 elsewhere."""
+    index, normal, mu = layout.pixel_geometry()
+    image = np.zeros(index.shape + (3,))
+    d = env.unit_direction()
+    tangent = tangent_toward_view(normal)
+    for i, table in enumerate(error_tables):
+        sel = index == i
+        if table is None or not sel.any():
+            continue
+        E, Vn, Vt = moments_at(table, mu[sel])
+        dn = np.abs(normal[sel] @ d)[:, None]
+        dt = np.abs(tangent[sel] @ d)[:, None]
+        image[sel] = env.constant * np.abs(E) + abs(env.gradient) * (np.abs(Vn) * dn
+                                                                     + np.abs(Vt) * dt)
+    return image
+
+
 @dataclass
 class BandStats:
     """Per sphere and band of mu: mean residual, its standard error and the mean reference."""

@@ -814,14 +814,33 @@ class HeitzBSDF:
         return m.E, m.Vn, m.Vt
 
 
-def moment_tables(bsdf: HeitzBSDF, n_mu: int, n_walks: int, rng):
+def moment_tables(bsdf: HeitzBSDF, mu, n_walks: int, rng):
     """Moment tables of the walk for the sphere-grid reference, with their Monte Carlo error:
-    (table, se_table), two quadrature.MomentTable on the same n_mu nodes (uniform in log mu),
-    the second holding the standard errors of E, Vn and Vt (moments_at on it interpolates the
-    errors, which is what a reference pixel's error is up to the interpolation weights)."""
-    from .quadrature import MU_MIN, MomentTable, _merge, _node_mu
+    (table, se_table), two quadrature.MomentTable on the nodes `mu` (in (0, 1]; see
+    `table_nodes`), the second holding the standard errors of E, Vn and Vt (moments_at on it
+    interpolates the errors, which is what a reference pixel's error is up to the
+    interpolation weights)."""
+    from .quadrature import MomentTable, _merge
 
-    x = np.linspace(np.log(MU_MIN), 0.0, max(int(n_mu), 4))
-    m = directional_moments_mc(bsdf.walk, _node_mu(x), n_walks, rng, bsdf.max_order)
+    mu = np.unique(np.asarray(mu, dtype=float))
+    x = np.log(mu)
+    m = directional_moments_mc(bsdf.walk, np.minimum(mu, 1.0 - 1e-8), n_walks, rng,
+                               bsdf.max_order)
     empty = MomentTable(np.zeros(0), *(np.zeros((0, 3)),) * 3)
     return _merge(empty, x, (m.E, m.Vn, m.Vt)), _merge(empty, x, (m.E_se, m.Vn_se, m.Vt_se))
+
+
+def table_nodes(n_mu: int = 24, uniform_from: float | None = None, spacing: float = 0.025):
+    """Incidences for `moment_tables`: n_mu nodes uniform in log(mu) on [MU_MIN, 1] (as the
+    quadrature tables), or, with `uniform_from`, those below it and nodes every `spacing` in mu
+    from it to 1: glass seen from the denser side bends on the scale of the roughness around
+    the critical angle (where quadrature.tabulate_moments refines by itself), and cubic
+    interpolation through Monte Carlo nodes wants them evenly spaced (clustered nodes amplify
+    their noise)."""
+    from .quadrature import MU_MIN
+
+    mu = np.exp(np.linspace(np.log(MU_MIN), 0.0, max(int(n_mu), 4)))
+    if uniform_from is None:
+        return mu
+    even = np.arange(1.0, uniform_from - 1e-9, -spacing)[::-1]
+    return np.concatenate([mu[mu < even[0] - 0.5 * spacing], even])
