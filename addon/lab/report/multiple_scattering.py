@@ -9,14 +9,15 @@
 
 Albedos: Lee by its deterministic quadrature (lee.albedo, converged to 1e-5), Heitz 2016 by
 its random walk (heitz2016, Monte Carlo with standard errors), single scattering by its
-sampler's weights (Monte Carlo). Lobe slices and rendered spheres are not part of this section
-(the Heitz 2016 OSL shader does not exist yet).
+sampler's weights (Monte Carlo). Lobe slices, rendered spheres and the cost per sample:
+comparison_views.py.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ...catalog import MODELS
+from . import comparison_views
 from ..reference import lee
 from ..reference.bsdf import MicrofacetBRDF
 from ..reference.heitz2016 import HeitzConductor
@@ -73,6 +74,16 @@ def compute(cfg, rows, tables, progress, notes, out) -> dict:
             progress(f"comparisons: F {fresnel}, roughness {r}")
     result = {"thetas": thetas, "walks": walks, "curves": data}
     _plot(result, out / "multiple_scattering.png")
+    # Lobes, rendered spheres and cost per sample (comparison_views.py).
+    lobe_walks = 1 << (15 if full else 11)
+    result["lobes"] = comparison_views.lobe_slices(lobe_walks, 5.0 if full else 10.0, rng)
+    comparison_views.plot_lobes(result["lobes"], out / "lobe_slices.png")
+    progress("comparisons: lobe slices")
+    samples = {"full": 1024, "quick": 256}.get(cfg.mode, 16)
+    renders = comparison_views.rendered_rows(samples, 96 if full else 64, progress,
+                                            repeats=1 if cfg.mode == "smoke" else 3)
+    comparison_views.plot_spheres(renders, out / "comparison_spheres.png")
+    result["renders"] = {k: v for k, v in renders.items() if k != "images"}
     return {"comparisons": result}
 
 
@@ -122,4 +133,7 @@ def page(cfg, rows, res) -> list:
               else f"{np.max(c['stderr']):.1e}")
         lines.append(f"| {'F = 1' if c['fresnel'] == 'none' else 'gold'} | {c['roughness']:g} | "
                      f"{c['model']} | {vals} | {se} |")
-    return lines + [""]
+    lines.append("")
+    if data.get("lobes") and data.get("renders"):
+        lines += comparison_views.page_lines(data["lobes"], data["renders"])
+    return lines
