@@ -374,6 +374,13 @@ HEITZ2016 = _add(Model(
               doc="How many bounces on the microsurface light may make before it is given up "
                   "(that light is lost, so low values darken rough surfaces): 1 is single "
                   "scattering; at 100 less than 1 in 100,000 paths is lost."),
+        # The first order is Cycles' GGX exactly (docs/models.md, sec. 5); later bounces stay
+        # stochastic and are not aimed at the lamps.
+        Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
+              doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky for "
+                  "the first bounce of a GGX surface, most of its light; later bounces find "
+                  "lamps by chance. Stochastic finds all of it by chance. Both converge to the "
+                  "same image."),
     ),
 ))
 

@@ -40,7 +40,7 @@ LABELS = {
     "lee_vgroove": ["Specular Tint", "Roughness", "Distribution", "Groove", "Fresnel", "IOR",
                     "N (complex IOR)", "K (extinction)", "Max Bounces"],
     "heitz2016": ["Tint", "Roughness", "Distribution", "Fresnel", "IOR", "N (complex IOR)",
-                  "K (extinction)", "Max Bounces"],
+                  "K (extinction)", "Max Bounces", "Light Sampling"],
 }
 ITEM_NAMES = {
     "distribution": ["GGX", "Beckmann"],

@@ -12,7 +12,10 @@
    The glass rows use the twin with forward transmission dropped, as the shader must (no
    refraction closure reaches wi.wo >= 0); tests/test_reference_heitz2016.py measures that share.
 2. The zero-noise furnace: with F = 1 every walk that escapes weighs exactly 1 and none is lost
-   at Max Bounces 100 (measured share below 1e-5), so every pixel is 1 at any roughness.
+   at Max Bounces 100 (measured share below 1e-5), so every pixel is 1 at any roughness (the
+   Stochastic estimator: the native part of Native + Residual is light-sampled, hence noisy).
+4. Light Sampling under a lamp: Native + Residual against Stochastic under a 45-degree sun over
+   a black world, pixel by pixel.
 3. Max Bounces 1 is single scattering: the walk's first order equals Walter 2007 with the
    height-correlated Smith G2 (the paper's result), held against the quadrature reference of
    `walter_reflection` (an independent formula and integrator, not the walk), and the full walk
@@ -45,9 +48,13 @@ ROWS = [({"fresnel_type": "conductor", "distribution": d}, (0.3, 0.7, 1.0))
 ROWS += [({"fresnel_type": "dielectric", "distribution": "ggx", "ior": e}, (0.3, 0.7, 1.0))
          for e in (1.5, 1 / 1.5)]
 ROWS += [({"fresnel_type": "dielectric", "distribution": "beckmann", "ior": 1.5}, (0.3, 1.0))]
+# The GGX rows above render with the default Light Sampling (Native + Residual: the first order
+# natively); the pure stochastic walk keeps rows of its own (Beckmann is stochastic anyway).
+ROWS += [({"fresnel_type": f, "distribution": "ggx", "ior": 1.5, "estimator": "stochastic"},
+          (0.3, 1.0)) for f in ("conductor", "dielectric")]
 SPECS = [SphereSpec("heitz2016", {**values, "roughness": r},
                     f"heitz {values['fresnel_type']} {values['distribution']} "
-                    f"eta={values.get('ior', 0):.3g} r={r}")
+                    f"eta={values.get('ior', 0):.3g} {values.get('estimator', '')} r={r}")
          for values, rs in ROWS for r in rs]
 
 
@@ -143,8 +150,8 @@ def test_noise_estimate_is_calibrated(converged):
 def test_zero_noise_furnace():
     """F = 1: every escaped walk weighs exactly 1, so 4 samples per pixel give 1 everywhere, for
     both distributions from the mirror to roughness 1."""
-    specs = [SphereSpec("heitz2016", {"fresnel_type": "none", "distribution": d, "roughness": r},
-                        f"{d} {r}")
+    specs = [SphereSpec("heitz2016", {"fresnel_type": "none", "distribution": d, "roughness": r,
+                                      "estimator": "stochastic"}, f"{d} {r}")
              for d in ("ggx", "beckmann") for r in (0.0, 0.05, 0.3, 0.6, 0.8, 1.0)]
     layout, image, _ = harness.render_specs(specs, grid.WHITE, 4, seed=3, cols=6, cell_px=24)
     index, _, _ = layout.pixel_geometry()
@@ -197,3 +204,57 @@ def test_full_walk_is_brighter_than_its_first_order(first_order):
     diff = full.mean(0) - single.mean(0)
     se = np.sqrt(full.var(0, ddof=1) / len(full) + single.var(0, ddof=1) / len(single))
     assert (diff > 10 * se).all(), f"full - first order {diff}, se {se}"
+
+
+# -- Light Sampling: the native first order under a lamp ----------------------------------------
+SUN_DEG = 45.0  # large enough for the stochastic walk to find it often
+SUN_SAMPLES = {"light_sampled": 512, "stochastic": 4096}
+
+
+def _sun_row(estimator, seed):
+    from addon.lab.report.scenes import add_sun
+
+    specs = [SphereSpec("heitz2016", {**values, "roughness": r, "estimator": estimator},
+                        f"{values['fresnel_type']} r={r} {estimator}")
+             for values in ({"fresnel_type": "conductor"},
+                            {"fresnel_type": "dielectric", "ior": 2.5})  # R: 18% at 0 deg
+             for r in (0.3, 0.8)]
+    scene = harness.new_scene()
+    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
+            for i, s in enumerate(specs)]
+    layout = grid.GridLayout(rows=1, cols=len(specs), cell_px=48, spacing=2.2)
+    harness.build_grid_scene(layout, mats, grid.Environment("black", 0.0),
+                             SUN_SAMPLES[estimator], seed=seed)
+    add_sun(scene, strength=1.0, angle_deg=SUN_DEG)
+    image, _ = harness.render(scene)
+    return layout, image, specs
+
+
+def test_light_sampled_walk_equals_stochastic_walk_under_a_sun():
+    """Native + Residual and Stochastic are two estimators of the same walk: under a 45-degree
+    sun over a black world (so every bit of light comes through the lamp, which Cycles
+    light-samples for the native part and the walk's delta exits hit by chance), their sphere
+    means agree within the Sidak-corrected noise of both. Catches the native part counted
+    twice or missed (MIS of the native closure with the lamp against the residual's hits), a
+    wrong native factor c, or a wrong first-order residual. Power: the native first order is
+    most of the light, so a double count would be an error of order the signal: the test must
+    resolve 10% of each sphere's mean."""
+    layout, split, specs = _sun_row("light_sampled", seed=7)
+    _, stochastic, _ = _sun_row("stochastic", seed=8)
+    assert np.isfinite(split).all() and np.isfinite(stochastic).all()
+    # Per pixel the two renders have the same expectation: the band statistics of their
+    # difference are its mean and noise (pixels are independent; the highlight cancels).
+    diff = grid.band_stats(layout, split, stochastic)
+    z_crit = grid.sidak_z(3 * len(diff))
+    failures = []
+    for d in diff:
+        if (np.abs(d.bias) > z_crit * d.stderr).any():
+            failures.append(f"{specs[d.sphere].label} mu in {d.band} side {d.side}: split - "
+                            f"stochastic {d.bias} se {d.stderr} (stochastic mean {d.reference})")
+    assert not failures, f"z_crit {z_crit:.2f}:\n" + "\n".join(failures)
+    # Power: on whole spheres a 10% error of the brightest channel would be seen.
+    spheres = grid.band_stats(layout, split, stochastic, bands=((0.05, 1.0001),), sides=False)
+    z_s = grid.sidak_z(3 * len(spheres))
+    for d in spheres:
+        assert 0.1 * d.reference.max() > z_s * d.stderr.max(), \
+            f"{specs[d.sphere].label}: no power (se {d.stderr}, mean {d.reference})"

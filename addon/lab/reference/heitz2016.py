@@ -417,7 +417,7 @@ class _SmithWalk:
         return np.ones(len(wr), dtype=bool)
 
     # Walk --------------------------------------------------------------------------------
-    def _walk(self, wi, rng, max_order, wo=None, order=None):
+    def _walk(self, wi, rng, max_order, wo=None, order=None, from_order=1):
         """The random walk from wi (rows); if wo is given also the next-event estimate toward
         wo (rows), restricted to scattering order `order` when not None. Returns
         (WalkSample, estimate or None)."""
@@ -457,7 +457,7 @@ class _SmithWalk:
                 break
             # scattering event number k + 1 at height h
             wi_ev = -wr
-            if est is not None and (order is None or order == k + 1):
+            if est is not None and (order is None or order == k + 1) and k + 1 >= from_order:
                 est[idx] += thr * self._next_event(wi_ev, wo[idx], h, outside)
             if est is not None and order is not None and k + 1 >= order:
                 break  # later events cannot contribute to a single order
@@ -844,3 +844,63 @@ def table_nodes(n_mu: int = 24, uniform_from: float | None = None, spacing: floa
         return mu
     even = np.arange(1.0, uniform_from - 1e-9, -spacing)[::-1]
     return np.concatenate([mu[mu < even[0] - 0.5 * spacing], even])
+
+
+# -- Light Sampling: the aimed residual (osl/heitz2016.osl) -----------------------------------
+def eval_residual(walk: HeitzConductor, wi, wo, c, rng, max_order: int = MAX_ORDER):
+    """One unbiased estimate per row of the residual r(wi, wo) |wo.n| = f |wo.n| - c f_ggx
+    |wo.n| (RGB) of the conductor walk, as the shader's eval_residual: the first order in closed
+    form with F - c for F ((F - c) D G2 / (4 wi.n), G2 height-correlated: eval_single's form),
+    plus one walk's next-event terms from the second event on. c: (3,) or (N, 3), a lower bound
+    of the first event's F (split.native_factor)."""
+    wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
+    mf = walk.mf
+    valid = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+    hv = normalize(wi + wo)
+    G2 = 1.0 / (1.0 + mf.lambda_(wi) + mf.lambda_(wo))
+    val = mf.D(hv) * G2 / (4.0 * np.where(valid, wi[:, 2], 1.0))
+    first = np.maximum(walk.F(dot(wi, hv)) - np.asarray(c, dtype=float), 0.0) * val[:, None]
+    first = np.where(valid[:, None], first, 0.0) * walk.tint
+    higher = walk._walk(wi, rng, max_order, wo=wo, from_order=2)[1]
+    return first + higher
+
+
+def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
+                          max_order: int = MAX_ORDER):
+    """The shader's residual sample with the lamps (osl/heitz2016.osl, lamps.py twin): rows of
+    wi at points P (normal z). The directions toward the lamps, L = {lamps_pdf > 0}, and the
+    rest are two integrals: with probability lam a direction from lamps_pdf weighted
+    eval_residual / (lam lamps_pdf) covers L, otherwise the walk (its first-order exit
+    weighing F - c, later orders their throughput) counted only outside L, over 1 - lam,
+    covers the rest. Returns (wo, weight RGB); E[weight g(wo)] = integral r |cos| g for any
+    records (a stale table moves noise only)."""
+    from . import lamps as lamp_twin
+
+    wi = _rows(wi)
+    n = len(wi)
+    P = np.broadcast_to(np.asarray(P, dtype=float), (n, 3))
+    Ng = np.broadcast_to([0.0, 0.0, 1.0], (n, 3))
+    lam, _ = lamp_twin.guide_fraction(records, P, Ng) if records else (np.zeros(n), None)
+    u = rng.random((n, 4))
+    aimed = u[:, 0] < lam
+    wo = np.zeros((n, 3))
+    weight = np.zeros((n, 3))
+    if aimed.any():
+        a = np.nonzero(aimed)[0]
+        d = lamp_twin.sample_lamps(records, P[a], Ng[a], u[a, 1], u[a, 2], u[a, 3])
+        p = lamp_twin.lamps_pdf(records, P[a], Ng[a], d)
+        ok = (d[:, 2] > 0.0) & (p > 0.0)
+        r = eval_residual(walk, wi[a], d, c, rng, max_order)
+        wo[a] = d
+        weight[a] = np.where(ok[:, None], r / np.where(ok, lam[a] * p, 1.0)[:, None], 0.0)
+    rest = np.nonzero(~aimed)[0]
+    if len(rest):
+        s = walk.sample(wi[rest], rng, max_order)
+        w = np.where((s.order == 1)[:, None], np.maximum(s.weight - np.asarray(c) * walk.tint,
+                                                         0.0), s.weight)
+        if records:
+            inside = lamp_twin.lamps_pdf(records, P[rest], Ng[rest], s.wo) > 0.0
+            w = np.where(inside[:, None], 0.0, w / (1.0 - lam[rest])[:, None])
+        wo[rest] = s.wo
+        weight[rest] = w
+    return wo, weight
