@@ -759,6 +759,7 @@ class HeitzBSDF:
         Carlo; `moment_tables` gives them with their standard errors)."""
 
     diffuse_albedo = np.zeros(3)
+    stochastic_eval = True  # eval is a Monte Carlo estimate, not a closed form
 
     def __init__(self, walk: _SmithWalk, max_order: int = MAX_ORDER, eval_walks: int = 16,
                  moment_walks: int = 200_000, seed: int = 0):
