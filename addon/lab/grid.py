@@ -129,20 +129,26 @@ def reference_image(layout: GridLayout, tables: list, env: Environment, moments_
     """Reference RGB image of the grid: tables[i] is sphere i's tabulated moments (E, Vn, Vt)
     as returned by `addon.lab.reference.quadrature.tabulate_moments`; `moments_at(table, mu)`
     interpolates them. Background pixels get the environment seen straight down (L(-z))."""
-    index, normal, mu = layout.pixel_geometry()
+    index, _, _ = layout.pixel_geometry()
     image = np.empty(index.shape + (3,))
     image[:] = env.radiance(-VIEW)
+    for sel, (E, Vn, Vt), dn, dt in _sphere_moments(layout, tables, env, moments_at):
+        image[sel] = env.constant * E + env.gradient * (Vn * dn + Vt * dt)
+    return image
+
+
+def _sphere_moments(layout: GridLayout, tables: list, env: Environment, moments_at):
+    """Per sphere with a table: its pixels (mask), the tables' (E, Vn, Vt) at their mu, and
+    n.d, t.d (columns) for the environment's gradient direction d."""
+    index, normal, mu = layout.pixel_geometry()
     d = env.unit_direction()
     tangent = tangent_toward_view(normal)
     for i, table in enumerate(tables):
         sel = index == i
         if table is None or not sel.any():
             continue
-        E, Vn, Vt = moments_at(table, mu[sel])
-        dn = (normal[sel] @ d)[:, None]
-        dt = (tangent[sel] @ d)[:, None]
-        image[sel] = env.constant * E + env.gradient * (Vn * dn + Vt * dt)
-    return image
+        yield (sel, moments_at(table, mu[sel]), (normal[sel] @ d)[:, None],
+               (tangent[sel] @ d)[:, None])
 
 
 def reference_error_image(layout: GridLayout, error_tables: list, env: Environment,
@@ -153,19 +159,11 @@ def reference_error_image(layout: GridLayout, error_tables: list, env: Environme
     constant SE_E + |gradient| (SE_Vn |n.d| + SE_Vt |t.d|) (its moments' errors added in
     magnitude; interpolation weights near 1). Neighbouring pixels share table nodes, so a band
     mean's reference error is the mean of this image over the band, not less. 0 elsewhere."""
-    index, normal, mu = layout.pixel_geometry()
+    index, _, _ = layout.pixel_geometry()
     image = np.zeros(index.shape + (3,))
-    d = env.unit_direction()
-    tangent = tangent_toward_view(normal)
-    for i, table in enumerate(error_tables):
-        sel = index == i
-        if table is None or not sel.any():
-            continue
-        E, Vn, Vt = moments_at(table, mu[sel])
-        dn = np.abs(normal[sel] @ d)[:, None]
-        dt = np.abs(tangent[sel] @ d)[:, None]
-        image[sel] = env.constant * np.abs(E) + abs(env.gradient) * (np.abs(Vn) * dn
-                                                                     + np.abs(Vt) * dt)
+    for sel, (E, Vn, Vt), dn, dt in _sphere_moments(layout, error_tables, env, moments_at):
+        image[sel] = env.constant * np.abs(E) + abs(env.gradient) * (np.abs(Vn * dn)
+                                                                     + np.abs(Vt * dt))
     return image
 
 
@@ -282,6 +280,21 @@ def relative_bias_failures(layout: GridLayout, render: np.ndarray, reference: np
         if (relative_bias > limit).any():
             failures.append(f"{labels[s.sphere]}: relative bias {relative_bias}")
     return failures
+
+
+def noise_calibration_failure(layout: GridLayout, image: np.ndarray, image2: np.ndarray,
+                              reference: np.ndarray) -> str:
+    """Two seeds: the differences of their band means over the per-pixel noise estimate must be
+    standard normal, else pixels are correlated and every z of a test is off; '' when they are.
+    One channel: the three share their random numbers, so they are not independent."""
+    s1 = band_stats(layout, image, reference)
+    s2 = band_stats(layout, image2, reference)
+    z = np.array([(a.bias[1] - b.bias[1]) / np.sqrt(a.stderr[1] ** 2 + b.stderr[1] ** 2)
+                  for a, b in zip(s1, s2) if a.stderr[1] > 0])
+    # Variance of a standard normal estimated from len(z) values: 1 +- a few sqrt(2 / len).
+    if abs(z.var() - 1.0) < 5 * np.sqrt(2.0 / len(z)):
+        return ""
+    return f"var(z) = {z.var():.3f}, n = {len(z)}"
 
 
 def sidak_z(tests: int, family_alpha: float = 1e-3) -> float:

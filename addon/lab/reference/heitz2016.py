@@ -579,17 +579,23 @@ class HeitzConductor(_SmithWalk):
         ratio = np.where(wo[:, 2] > 0.0, wo[:, 2] / np.maximum(wi[:, 2], _TINY), 0.0)
         return rev * ratio[:, None]
 
-    def eval_single(self, wi, wo):
-        """Closed-form first order, f_1(wi, wo) |wo.n| = F D G2 / (4 wi.z) with the
-        height-correlated G2 = 1 / (1 + Lambda_i + Lambda_o) (Heitz 2014 eq. 99): the mean of
-        eval(..., order=1) (derivation in the module doc). RGB (N, 3)."""
+    def single_kernel(self, wi, wo):
+        """(F(wi.h) RGB, D G2 / (4 wi.z) with the height-correlated G2, 0 where wi or wo is
+        below the horizon): the first order's two factors, for rows of wi, wo."""
         wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
         mf = self.mf
         valid = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         hv = normalize(wi + wo)
         G2 = 1.0 / (1.0 + mf.lambda_(wi) + mf.lambda_(wo))
         val = mf.D(hv) * G2 / (4.0 * np.where(valid, wi[:, 2], 1.0))
-        return np.where(valid[:, None], self.F(dot(wi, hv)) * val[:, None], 0.0) * self.tint
+        return self.F(dot(wi, hv)), np.where(valid, val, 0.0)
+
+    def eval_single(self, wi, wo):
+        """Closed-form first order, f_1(wi, wo) |wo.n| = F D G2 / (4 wi.z) with the
+        height-correlated G2 = 1 / (1 + Lambda_i + Lambda_o) (Heitz 2014 eq. 99): the mean of
+        eval(..., order=1) (derivation in the module doc). RGB (N, 3)."""
+        F, val = self.single_kernel(wi, wo)
+        return F * val[:, None] * self.tint
 
 
 class HeitzDielectric(_SmithWalk):
@@ -855,13 +861,8 @@ def eval_residual(walk: HeitzConductor, wi, wo, c, rng, max_order: int = MAX_ORD
     plus one walk's next-event terms from the second event on. c: (3,) or (N, 3), a lower bound
     of the first event's F (split.native_factor)."""
     wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
-    mf = walk.mf
-    valid = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-    hv = normalize(wi + wo)
-    G2 = 1.0 / (1.0 + mf.lambda_(wi) + mf.lambda_(wo))
-    val = mf.D(hv) * G2 / (4.0 * np.where(valid, wi[:, 2], 1.0))
-    first = np.maximum(walk.F(dot(wi, hv)) - np.asarray(c, dtype=float), 0.0) * val[:, None]
-    first = np.where(valid[:, None], first, 0.0) * walk.tint
+    F, val = walk.single_kernel(wi, wo)
+    first = np.maximum(F - np.asarray(c, dtype=float), 0.0) * val[:, None] * walk.tint
     higher = walk._walk(wi, rng, max_order, wo=wo, from_order=2)[1]
     return first + higher
 
