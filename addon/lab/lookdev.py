@@ -162,7 +162,8 @@ def pairs():
             ("gold", "Gold: Walter GGX", "metallic"),
             ("rough_glass", "Rough glass: Walter GGX", "glass"),
             ("red_plastic", "Red plastic: Cook-Torrance", "principled"),
-            ("rough_gold_lee", "Rough gold: Lee V-grooves", "metallic_multiscatter")):
+            ("rough_gold_lee", "Rough gold: Lee V-grooves", "metallic_multiscatter"),
+            ("rough_gold_heitz", "Rough gold: Heitz 2016 walk", "metallic_multiscatter")):
         model_id, values = preset(pid)
         stochastic = any(p.id == "estimator" for p in MODELS[model_id].params)
         rows.append((label, model_id, values, kind, stochastic))
