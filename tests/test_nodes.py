@@ -416,11 +416,21 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
     # Constant folding: the OSL optimizer sees the same shader groups (instances, connections,
     # ops left after constant folding) for menus as for unlinked integers ...
     print(f"\n[menus] OSL statistics, menus: {menu['stats']}")
+    print(f"[menus] integers: {integer['stats']}")
     print(f"[menus] varying: {varying['stats']}")
     print(f"[menus] render s (menu, int, varying): {menu['seconds']:.3f} {integer['seconds']:.3f} "
           f"{varying['seconds']:.3f}")
     assert any(line.startswith("Optimized") for line in menu["stats"]), menu["_log"]
-    assert menu["stats"] == integer["stats"]
+    # The "Instances: N requested, N peak" counter is not deterministic: in a fresh-clone CI run
+    # on 5.0.1 it read 89 for the menus against 90 for the integers while the menus' run still
+    # compiled "42 groups, 90 instances" (3 reruns read 90 and 90; the same test had failed
+    # once before, under load). The compiled instance count, which is the folding's, stays
+    # compared with every other line.
+    def folding_stats(stats):
+        return [line for line in stats if not line.startswith("Instances:")]
+
+    assert any(line.startswith("Compiled") for line in menu["stats"]), menu["_log"]
+    assert folding_stats(menu["stats"]) == folding_stats(integer["stats"])
     # ... while the same codes through a varying chain are seen as connections.
     assert varying["stats"] != integer["stats"]
     # Per shader layer: no enum survives optimization as a parameter read, menu or integer;

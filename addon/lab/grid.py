@@ -242,11 +242,11 @@ def reference_tables(specs: list) -> list:
         if spec is None:
             tables.append(None)
             continue
-        # Keyed by the resolved values (defaults filled in, clamped); the sampler does not
-        # change the BSDF.
+        # Keyed by the resolved values (defaults filled in, clamped); the sampler and the
+        # estimator do not change the BSDF.
         values = MODELS[spec.model_id].resolve(spec.values)
         key = (spec.model_id, tuple(sorted((k, repr(v)) for k, v in values.items()
-                                           if k != "sampler")))
+                                           if k not in ("sampler", "estimator"))))
         if key not in _TABLES:
             _TABLES[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
         tables.append(_TABLES[key])
