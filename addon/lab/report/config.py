@@ -74,6 +74,7 @@ class Config:
     ref_cell_px: int
     sun_nodes: tuple  # (radial, azimuthal) of the sun-disk quadrature; the check uses half
     moment_order: int = 6
+    walk_moments: int | None = None  # walks per incidence of a Monte Carlo table (None: 200,000)
     seed: int = 0
     combo_seconds: float = 20.0  # stability sweep: per parameter combination
     model_seconds: float = 240.0  # stability sweep: per model
@@ -103,6 +104,7 @@ def config(mode: str) -> Config:
     if mode == "smoke":
         return Config("smoke", (1, 8), 10, (0.3, 1.0), ("gradient",), 200, 64, "none", 500,
                       (0.0, 60.0, 89.9), (0.3,), 32, (2,), 4, 8, (8, 16), moment_order=4,
+                      walk_moments=20_000,
                       combo_seconds=1.0, model_seconds=3.0,
                       lee=LeeConfig(furnace_samples=16, furnace_px=16, cost_samples=(4, 32),
                                     cost_px=12, cost_repeats=2, tracer_n=1 << 14,

@@ -15,10 +15,12 @@ def _table_key(spec):
 
 class ReferenceTables:
     """Moment tables by (model, values without the sampler and estimator: the same BSDF),
-    computed once."""
+    computed once: by quadrature of `order`, or for a walk (Heitz 2016, whose evaluation is
+    Monte Carlo) from `walks` sampled walks per incidence (None: the model's default)."""
 
-    def __init__(self, order: int):
+    def __init__(self, order: int, walks: int | None = None):
         self.order = order
+        self.walks = walks
         self.cache = {}
 
     def get(self, spec):
@@ -27,8 +29,10 @@ class ReferenceTables:
 
         key = _table_key(spec)
         if key not in self.cache:
-            self.cache[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values),
-                                               order=self.order)
+            bsdf = make_bsdf(spec.model_id, spec.values)
+            if self.walks and getattr(bsdf, "stochastic_eval", False):
+                bsdf.moment_walks = self.walks
+            self.cache[key] = tabulate_moments(bsdf, order=self.order)
         return self.cache[key]
 
 

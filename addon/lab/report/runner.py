@@ -39,7 +39,7 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
     rows = build_rows(notes)
     for n in notes:
         progress(n)
-    tables = ReferenceTables(cfg.moment_order)
+    tables = ReferenceTables(cfg.moment_order, cfg.walk_moments)
     res = {}
     for name, module in SECTION_MODULES:
         if name in sections:

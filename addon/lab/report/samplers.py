@@ -93,7 +93,7 @@ def fireflies(cfg, progress, out_dir) -> dict:
              for label, model, values in FIREFLY_ROWS for s in FIREFLY_SAMPLERS]
     layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 4, seed=5,
                                             cols=len(FIREFLY_SAMPLERS), cell_px=cfg.fireflies_px)
-    tables = ReferenceTables(cfg.moment_order)
+    tables = ReferenceTables(cfg.moment_order, cfg.walk_moments)
     ref = grid.reference_image(layout, [tables.get(s) for s in specs], grid.GRADIENT, moments_at)
     index, _, mu = layout.pixel_geometry()
     stats = {}
