@@ -421,7 +421,6 @@ float sample_reflection(int sampler, int dist, int masking, vector wi, float ax,
 #define MFL_ALPHA_SPLIT_MIN 1e-3
 #define MFL_MIN_SEARCH_STEPS 16
 #define MFL_FRESNEL_MARGIN 1e-4
-#define MFL_CUSP_K 1.0
 #define MFL_GOLDEN 0.61803398874989485
 
 // Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
@@ -483,54 +482,60 @@ float fresnel_min(int fresnel_type, float lo, float hi, float origin, float ior,
     return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
 }
 
-// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
-// has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
-// two sides are searched apart; otherwise one search covers [lo, 1].
-float conductor_min(float lo, float n, float k)
-{
-    float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
-    float split_at = max(lo, xc);
-    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, xc, 0.0, n, k);
-    if (k <= 0.0 || xc <= lo)
-        return right;
-    return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, xc, 0.0, n, k));
-}
-
-// c / tint = F_lo G_lo per channel (split.native_factor).
+// c / tint per channel (split.native_factor): G_lo, times F_lo where the native closure has no
+// Fresnel of its own (dielectric). A conductor's native part is Cycles' conductor_bsdf, whose
+// Fresnel is the same closed form as fresnel_conductor (Born & Wolf), so c carries no F_lo.
 color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax, float ay,
                     float ior, color n, color k)
 {
     float lo = reachable_cos_lo(wi);
     color F_lo = color(1.0);
-    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
-        F_lo = color(conductor_min(lo, n[0], k[0]), conductor_min(lo, n[1], k[1]),
-                     conductor_min(lo, n[2], k[2]));
-    else if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)  // right of the TIR plateau F = 1
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)  // right of the TIR plateau F = 1
         F_lo = color(fresnel_min(fresnel_type, max(lo, critical_cos(ior)), 1.0, critical_cos(ior),
                                  ior, 0.0, 0.0));
     float G_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
     return F_lo * G_lo;
 }
 
+// The Fresnel factor the native closure carries itself at wi.h (split.native_fresnel): the
+// conductor's F (conductor_bsdf), else 1 (microfacet("ggx") has none).
+color native_fresnel(int fresnel_type, float cos_i, color n, color k)
+{
+    return (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR) ? fresnel_conductor(cos_i, n, k)
+                                                       : color(1.0);
+}
+
+// Cycles' native height-correlated GGX closure of a split: conductor_bsdf for a conductor (F
+// included), microfacet("ggx") with no Fresnel otherwise.
+closure color native_ggx(int fresnel_type, vector t, float ax, float ay, color n, color k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return conductor_bsdf(N, t, ax, ay, n, k, "ggx");
+    return microfacet("ggx", N, t, ax, ay, 0.0, 0);
+}
+
 // One of the two parts per shading sample, never both: when Cycles samples a singular closure
 // it adds every other closure's value in that direction with the balance heuristic, taking
 // 1e6 for the singular pdf, which biases a sharp native lobe beside a delta residual (gold at
 // roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q = a / (a + r),
-// a the channel sum of the native weight and r that of w_choice, the residual's weight as the
+// a the channel sum of a_choice (the native weight times the Fresnel factor the closure
+// carries itself, at normal reflection) and r that of w_choice, the residual's weight as the
 // model's sampler alone would give its direction, and divided by it: exact for any q (q = 1
 // where the residual is 0), and the two choices then carry about the same total weight, so the
 // choice adds little noise. r is not the aimed weight itself: a residual ray aimed at a lamp has
 // a small weight, so it would be chosen rarely and then carry the whole a + r into the lamp, a
 // rare and heavy sample (a separable gold sphere under a 4-degree sun: pixels +1.0 at 512 spp).
-closure color split_closures(color w_native, closure color native, color w_residual,
-                             closure color residual, color w_choice, float u)
+closure color split_closures(color w_native, color a_choice, closure color native,
+                             color w_residual, color w_choice, closure color residual, float u)
 {
-    float a = max(w_native[0] + w_native[1] + w_native[2], 0.0);
+    float a_sum = max(w_native[0] + w_native[1] + w_native[2], 0.0);
     float r = max(w_residual[0] + w_residual[1] + w_residual[2], 0.0);
     if (r <= 0.0)
         return w_native * native;
-    if (a <= 0.0)
+    if (a_sum <= 0.0)
         return w_residual * residual;
+    // Never 0 where the native part has weight (an index-matched conductor's F(1) is 0).
+    float a = max(a_choice[0] + a_choice[1] + a_choice[2], 1e-4 * a_sum);
     float q = a / (a + max(w_choice[0] + w_choice[1] + w_choice[2], r));
     if (u < q)
         return (w_native / q) * native;

@@ -855,14 +855,15 @@ def table_nodes(n_mu: int = 24, uniform_from: float | None = None, spacing: floa
 
 # -- Light Sampling: the aimed residual (osl/heitz2016.osl) -----------------------------------
 def eval_residual(walk: HeitzConductor, wi, wo, c, rng, max_order: int = MAX_ORDER):
-    """One unbiased estimate per row of the residual r(wi, wo) |wo.n| = f |wo.n| - c f_ggx
+    """One unbiased estimate per row of the residual r(wi, wo) |wo.n| = f |wo.n| - c F f_ggx
     |wo.n| (RGB) of the conductor walk, as the shader's eval_residual: the first order in closed
-    form with F - c for F ((F - c) D G2 / (4 wi.n), G2 height-correlated: eval_single's form),
-    plus one walk's next-event terms from the second event on. c: (3,) or (N, 3), a lower bound
-    of the first event's F (split.native_factor)."""
+    form with F (1 - c) for F (F (1 - c) D G2 / (4 wi.n), G2 height-correlated: eval_single's
+    form), plus one walk's next-event terms from the second event on. c: (3,) or (N, 3), the
+    share of the first order the native part carries (split.native_factor: 1, the native part
+    being Cycles' conductor_bsdf, F included)."""
     wi, wo = np.broadcast_arrays(_rows(wi), _rows(wo))
     F, val = walk.single_kernel(wi, wo)
-    first = np.maximum(F - np.asarray(c, dtype=float), 0.0) * val[:, None] * walk.tint
+    first = F * np.maximum(1.0 - np.asarray(c, dtype=float), 0.0) * val[:, None] * walk.tint
     higher = walk._walk(wi, rng, max_order, wo=wo, from_order=2)[1]
     return first + higher
 
@@ -873,7 +874,7 @@ def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
     wi at points P (normal z). The directions toward the lamps, L = {lamps_pdf > 0}, and the
     rest are two integrals: with probability lam a direction from lamps_pdf weighted
     eval_residual / (lam lamps_pdf) covers L, otherwise the walk (its first-order exit
-    weighing F - c, later orders their throughput) counted only outside L, over 1 - lam,
+    weighing F (1 - c), later orders their throughput) counted only outside L, over 1 - lam,
     covers the rest. Returns (wo, weight RGB); E[weight g(wo)] = integral r |cos| g for any
     records (a stale table moves noise only)."""
     from . import lamps as lamp_twin
@@ -898,8 +899,8 @@ def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
     rest = np.nonzero(~aimed)[0]
     if len(rest):
         s = walk.sample(wi[rest], rng, max_order)
-        w = np.where((s.order == 1)[:, None], np.maximum(s.weight - np.asarray(c) * walk.tint,
-                                                         0.0), s.weight)
+        w = np.where((s.order == 1)[:, None], s.weight * np.maximum(1.0 - np.asarray(c), 0.0),
+                     s.weight)
         if records:
             inside = lamp_twin.lamps_pdf(records, P[rest], Ng[rest], s.wo) > 0.0
             w = np.where(inside[:, None], 0.0, w / (1.0 - lam[rest])[:, None])

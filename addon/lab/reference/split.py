@@ -2,25 +2,30 @@
 non-negative stochastic residual (the twin of the split in osl/microfacet.h and the Walter
 shaders; design and measurements: docs/light-sampling.md).
 
-    f(wi, wo) = c(wi) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
+    f(wi, wo) = c(wi) F_n(wi.h) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
 
 f_ggx is height-correlated Smith GGX with F = 1 and the model's own alphas, which is exactly
-Cycles' `microfacet("ggx", N, U, ax, ay, 0, 0)`: Cycles light-samples it (lamps, world, emissive
-meshes, with multiple importance sampling). The residual r is the stochastic delta lobe of the
-model's own sampler, weighted by (f - c f_ggx) cos / pdf. It must never be negative, because
-Cycles drops negative closure weights; so c(wi) is a lower bound of f / f_ggx over every wo a
-reflection can reach from wi, per RGB channel:
+Cycles' `microfacet("ggx", N, U, ax, ay, 0, 0)`; F_n is the Fresnel factor the native closure
+carries itself: a conductor's F for Cycles' `conductor_bsdf(N, U, ax, ay, n, k, "ggx")`, whose
+Fresnel is the same closed form as fresnel_conductor (tests/test_reference_split.py holds a
+float32 transcription of Cycles' polarised formula to it), else 1. Cycles light-samples the
+native part (lamps, world, emissive meshes, with multiple importance sampling). The residual r
+is the stochastic delta lobe of the model's own sampler, weighted by (f - native) cos / pdf. It
+must never be negative, because Cycles drops negative closure weights; so c(wi) is a lower
+bound of f / (F_n f_ggx) over every wo a reflection can reach from wi, per RGB channel:
 
-    f / f_ggx = tint F(wi.h) G2(wi, wo) / G2_hc(wi, wo)
-    c(wi)     = tint F_lo(wi) G_lo(wi)
+    f / (F_n f_ggx) = tint (F(wi.h) / F_n(wi.h)) G2(wi, wo) / G2_hc(wi, wo)
+    c(wi)           = tint F_lo(wi) G_lo(wi)
 
-- F_lo: the least Fresnel factor over the reachable wi.h in [cos(pi/4 + theta_i/2), 1] (wo on
-  the horizon opposite wi gives the lowest), found by a golden-section search (conductor and
-  dielectric Fresnel are unimodal in wi.h; tests/test_reference_split.py checks it on dense
-  grids) and lowered by a relative margin that covers the search's resolution and float
-  rounding; F = 1 (none): 1.
+- F_lo: 1 for a conductor (F / F_n = 1) and for F = 1 (none); for a dielectric, the least
+  Fresnel factor over the reachable wi.h in [cos(pi/4 + theta_i/2), 1] (wo on the horizon
+  opposite wi gives the lowest), found by a golden-section search (dielectric Fresnel is
+  unimodal in wi.h on each side of the critical angle; tests/test_reference_split.py checks it
+  on dense grids) and lowered by a relative margin that covers the search's resolution and float
+  rounding.
 - G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) = 1 / (1 + Li)
   (Heitz 2014 eqs. 98, 99; approached as wo grazes).
+So a height-correlated conductor (or F = 1) has no residual at all: it is Cycles' closure.
 Beckmann has no such bound (its tail falls faster than GGX's), so it stays stochastic.
 
 The shader returns one of the two parts per sample, never both (`split_closures` in
@@ -54,9 +59,6 @@ ALPHA_SPLIT_MIN = 1e-3
 # curvature over that interval). Each step is one Fresnel evaluation per channel and side, the
 # split's main cost per shading point (24 steps made the split twice as costly as native GGX).
 MIN_SEARCH_STEPS = 16
-# Below this extinction a conductor with n < 1 has a cusp at its critical angle (see
-# conductor_min); above it F is smooth there (tests/test_reference_split.py checks both).
-CUSP_K = 1.0
 # Relative margin under the minimum found: covers the search and float32 rounding in OSL.
 FRESNEL_MARGIN = 1e-4
 _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
@@ -108,7 +110,8 @@ def critical_cos(eta):
 
 
 def fresnel_lower_bound(bsdf, wi):
-    """F_lo(wi) (..., 3): the least Fresnel factor over the wi.h a reflection can reach."""
+    """F_lo(wi) (..., 3): the least of F / F_n over the wi.h a reflection can reach (1 where
+    the native closure carries the model's own Fresnel, or there is none)."""
     wi = np.asarray(wi, dtype=float)
     lo = reachable_cos_lo(wi)[..., None] * np.ones(3)
     if isinstance(bsdf, MicrofacetGlass) or bsdf.fresnel == "dielectric":
@@ -117,27 +120,16 @@ def fresnel_lower_bound(bsdf, wi):
         eta = bsdf.eta if isinstance(bsdf, MicrofacetGlass) else bsdf.ior
         xc = critical_cos(eta) * np.ones_like(lo)
         return fresnel_min(lambda x: fresnel_dielectric(x, eta), np.maximum(lo, xc), 1.0, xc)
-    if bsdf.fresnel == "conductor":
-        return conductor_min(bsdf.n, bsdf.k, lo)
     return np.ones_like(lo)
 
 
-def conductor_min(n, k, lo):
-    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption
-    (k < CUSP_K) F has a near-plateau left of the critical angle and a cusp and dip right of
-    it, as narrow as 1e-6 in wi.h: the two sides are searched separately (k = 0: the plateau is
-    1). Otherwise F is smooth and one search covers [lo, 1]."""
-    n = np.asarray(n, dtype=float)
-    k = np.asarray(k, dtype=float)
-    xc = np.broadcast_to(np.where(k < CUSP_K, critical_cos(n), 0.0), np.shape(lo))
-    split_at = np.maximum(lo, xc)
-
-    def F(x):
-        return fresnel_conductor(x, n, k)
-
-    right = fresnel_min(F, split_at, 1.0, xc)
-    left = np.where((k > 0.0) & (xc > lo), fresnel_min(F, lo, split_at, xc), 1.0)
-    return np.minimum(left, right)
+def native_fresnel(bsdf, cos_i):
+    """F_n (..., 3): the Fresnel factor the native closure carries itself at wi.h = cos_i: a
+    conductor's F (Cycles' conductor_bsdf), else 1 (microfacet("ggx") has none)."""
+    cos_i = np.asarray(cos_i, dtype=float)
+    if isinstance(bsdf, MicrofacetBRDF) and bsdf.fresnel == "conductor":
+        return fresnel_conductor(cos_i[..., None], bsdf.n, bsdf.k)
+    return np.ones(cos_i.shape + (3,))
 
 
 def masking_lower_bound(bsdf, wi):
@@ -183,8 +175,10 @@ def native_ggx(bsdf) -> MicrofacetBRDF:
 
 
 def eval_native(bsdf, wi, wo):
-    """c(wi) f_ggx(wi, wo) (..., 3): what the native closure carries."""
-    return native_weight(bsdf, wi) * native_ggx(bsdf).eval(wi, wo)
+    """c(wi) F_n(wi.h) f_ggx(wi, wo) (..., 3): what the native closure carries."""
+    wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
+    F_n = native_fresnel(bsdf, dot(wi, normalize(wi + wo)))
+    return native_weight(bsdf, wi) * F_n * native_ggx(bsdf).eval(wi, wo)
 
 
 def eval_residual(bsdf, wi, wo):
@@ -194,13 +188,14 @@ def eval_residual(bsdf, wi, wo):
 
 def residual_weight_reflection(bsdf, wi, wo, m, inv_pdf_factor):
     """The residual's reflection sample weight (..., 3), as the OSL computes it:
-    tint inv_pdf_factor (F G2 - c' G2_hc), c' = F_lo G_lo (no tint), clamped at 0 against
+    tint inv_pdf_factor (F G2 - c' F_n G2_hc), c' = F_lo G_lo (no tint), clamped at 0 against
     rounding. inv_pdf_factor is the sampler's f cos / (F G2 pdf) (bsdf.py `sample`)."""
     mf = bsdf.mf
     g2 = mf.G2(wi, wo, m, bsdf.masking)[..., None]
     g2_hc = mf.G2(wi, wo, m, "height_correlated")[..., None]
     F = bsdf.F(dot(wi, m))
-    w = np.asarray(inv_pdf_factor)[..., None] * (F * g2 - native_factor(bsdf, wi) * g2_hc)
+    F_n = native_fresnel(bsdf, dot(wi, m))
+    w = np.asarray(inv_pdf_factor)[..., None] * (F * g2 - native_factor(bsdf, wi) * F_n * g2_hc)
     return bsdf.tint * np.maximum(w, 0.0)
 
 
@@ -219,13 +214,16 @@ def sample_residual(bsdf, wi, u):
 
 def albedo_share(bsdf, wi, n: int = 1 << 16, seed: int = 0):
     """Share of the directional albedo the native closure carries at each wi (..., 3) and
-    its standard error: c(wi) E_ggx(wi) / E(wi), both albedos by Monte Carlo with n samples
-    (E_ggx with GGX visible normals, weight G2_hc / G1; E with the model's sampler)."""
+    its standard error: c(wi) E_n(wi) / E(wi), both albedos by Monte Carlo with n samples
+    (E_n with GGX visible normals, weight F_n G2_hc / G1; E with the model's sampler)."""
     wi = normalize(np.asarray(wi, dtype=float).reshape(-1, 3))
     rng = np.random.default_rng(seed)
     u = rng.random((n, 1, 3))
     _, w_model, _ = bsdf.sample(wi[None], u)
-    _, w_ggx, _ = native_ggx(bsdf).sample(wi[None], u)
+    wo_ggx, w_ggx, _ = native_ggx(bsdf).sample(wi[None], u)
+    with np.errstate(invalid="ignore"):  # a failed sample's wo may be 0; its weight is 0
+        F_n = native_fresnel(bsdf, dot(wi[None], normalize(wi[None] + wo_ggx)))
+    w_ggx = np.where(w_ggx > 0.0, w_ggx * np.nan_to_num(F_n), 0.0)
     c = native_weight(bsdf, wi)
     E, E_ggx = w_model.mean(axis=0), w_ggx.mean(axis=0)
     share = np.where(E > 0, c * E_ggx / np.where(E > 0, E, 1.0), 0.0)
