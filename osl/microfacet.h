@@ -410,107 +410,35 @@ float sample_reflection(int sampler, int dist, int masking, vector wi, float ax,
 
 // ---------------------------------------------------------------------------------------
 // The light-sampled split (docs/light-sampling.md; twin: addon/lab/reference/split.py):
-//   f = c(wi) f_ggx + r,   r >= 0,
-// f_ggx Cycles' microfacet("ggx") (height-correlated Smith GGX, F = 1, the model's alphas),
-// which Cycles light-samples, and r the model's own stochastic lobe. c = tint F_lo G_lo is a
-// lower bound of f / f_ggx over every reachable wo, so r is never negative (Cycles drops
-// negative weights): F_lo the least Fresnel factor over the reachable wi.h, G_lo the least
-// ratio G2 / G2_hc (height-correlated 1, separable 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99).
+//   f = c(wi) F f_ggx + r,   r >= 0,
+// F f_ggx Cycles' native closure (height-correlated Smith GGX with the model's alphas and
+// Fresnel factor F), which Cycles light-samples, and r the model's own stochastic lobe.
+// c = tint G_lo is a lower bound of f / (F f_ggx) over every wo, so r is never negative (Cycles
+// drops negative weights): G_lo the least ratio G2 / G2_hc (height-correlated 1, separable
+// 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99).
 
 // Below this alpha the lobe is nearly a mirror: stay stochastic (split.ALPHA_SPLIT_MIN).
 #define MFL_ALPHA_SPLIT_MIN 1e-3
-#define MFL_MIN_SEARCH_STEPS 16
-#define MFL_FRESNEL_MARGIN 1e-4
-#define MFL_GOLDEN 0.61803398874989485
 
-// Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
-float reachable_cos_lo(vector wi)
+// c / tint (split.native_factor): G_lo, the least G2 / G2_hc over wo (1 for height-correlated
+// masking, 1 / (1 + Lambda(wi)) for separable). The native closure carries the model's own
+// Fresnel factor (native_ggx), so c needs no Fresnel bound.
+float native_factor(int masking, int dist, vector wi, float ax, float ay)
 {
-    return max(cos(0.25 * MFL_PI + 0.5 * acos(clamp(wi[2], -1.0, 1.0))), 0.0);
+    return (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
 }
 
-// cos of the critical angle (0 for eta >= 1): F is a plateau at 1 left of it.
-float critical_cos(float eta) { return sqrt(max(1.0 - eta * eta, 0.0)); }
-
-float fresnel_of(int fresnel_type, float x, float ior, float n, float k)
-{
-    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
-        return fresnel_conductor(x, n, k);
-    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
-        return fresnel_dielectric(x, ior);
-    return 1.0;
-}
-
-// x = origin + sign t^2, clamped to [lo, hi]: the search variable of fresnel_min.
-float fresnel_at(int fresnel_type, float t, float origin, float sign, float lo, float hi,
-                 float ior, float n, float k)
-{
-    return fresnel_of(fresnel_type, clamp(origin + sign * t * t, lo, hi), ior, n, k);
-}
-
-// Golden-section minimum of the (unimodal) Fresnel factor over x in [lo, hi], searched in
-// t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
-// F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
-// (split.fresnel_min, the same steps).
-float fresnel_min(int fresnel_type, float lo, float hi, float origin, float ior, float n, float k)
-{
-    float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
-    float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
-    float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
-    float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
-    float f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
-    float f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
-    float best = min(fresnel_at(fresnel_type, a, origin, sign, lo, hi, ior, n, k),
-                     fresnel_at(fresnel_type, b, origin, sign, lo, hi, ior, n, k));
-    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
-        best = min(best, min(f1, f2));
-        if (f1 < f2) {  // the minimum lies in [a, x2]
-            b = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = b - MFL_GOLDEN * (b - a);
-            f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
-        }
-        else {  // in [x1, b]
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + MFL_GOLDEN * (b - a);
-            f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
-        }
-    }
-    return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
-}
-
-// c / tint per channel (split.native_factor): G_lo, times F_lo where the native closure has no
-// Fresnel of its own (dielectric). A conductor's native part is Cycles' conductor_bsdf, whose
-// Fresnel is the same closed form as fresnel_conductor (Born & Wolf), so c carries no F_lo.
-color native_factor(int fresnel_type, int masking, int dist, vector wi, float ax, float ay,
-                    float ior, color n, color k)
-{
-    float lo = reachable_cos_lo(wi);
-    color F_lo = color(1.0);
-    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)  // right of the TIR plateau F = 1
-        F_lo = color(fresnel_min(fresnel_type, max(lo, critical_cos(ior)), 1.0, critical_cos(ior),
-                                 ior, 0.0, 0.0));
-    float G_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
-    return F_lo * G_lo;
-}
-
-// The Fresnel factor the native closure carries itself at wi.h (split.native_fresnel): the
-// conductor's F (conductor_bsdf), else 1 (microfacet("ggx") has none).
-color native_fresnel(int fresnel_type, float cos_i, color n, color k)
-{
-    return (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR) ? fresnel_conductor(cos_i, n, k)
-                                                       : color(1.0);
-}
-
-// Cycles' native height-correlated GGX closure of a split: conductor_bsdf for a conductor (F
-// included), microfacet("ggx") with no Fresnel otherwise.
-closure color native_ggx(int fresnel_type, vector t, float ax, float ay, color n, color k)
+// Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own
+// Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf with no
+// transmission for a dielectric (the same closed forms; tests/test_reference_split.py),
+// microfacet("ggx") with no Fresnel for none.
+closure color native_ggx(int fresnel_type, vector t, float ax, float ay, float ior, color n,
+                         color k)
 {
     if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
         return conductor_bsdf(N, t, ax, ay, n, k, "ggx");
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, ior, "ggx");
     return microfacet("ggx", N, t, ax, ay, 0.0, 0);
 }
 
@@ -519,7 +447,7 @@ closure color native_ggx(int fresnel_type, vector t, float ax, float ay, color n
 // 1e6 for the singular pdf, which biases a sharp native lobe beside a delta residual (gold at
 // roughness 0.05: +1.4% red, -1.9% blue near the rim). Chosen with probability q = a / (a + r),
 // a the channel sum of a_choice (the native weight times the Fresnel factor the closure
-// carries itself, at normal reflection) and r that of w_choice, the residual's weight as the
+// carries itself, at the mirror direction) and r that of w_choice, the residual's weight as the
 // model's sampler alone would give its direction, and divided by it: exact for any q (q = 1
 // where the residual is 0), and the two choices then carry about the same total weight, so the
 // choice adds little noise. r is not the aimed weight itself: a residual ray aimed at a lamp has

@@ -102,12 +102,14 @@ def test_behind_inside_and_below_get_no_weight():
 
 BSDFS = {
     "gold separable r0.5": ("walter_reflection", {"roughness": 0.5, "masking": "separable"}),
-    # (height-correlated gold has no residual: Cycles' conductor_bsdf carries all of it)
-    "dielectric r0.3": ("walter_reflection", {"roughness": 0.3, "fresnel_type": "dielectric"}),
+    # (height-correlated GGX has no residual: Cycles' own closure carries all of it)
+    "dielectric separable r0.3": ("walter_reflection", {"roughness": 0.3, "masking": "separable",
+                                                         "fresnel_type": "dielectric"}),
     "beckmann gold r0.4": ("walter_reflection", {"roughness": 0.4, "distribution": "beckmann"}),
     "cook-torrance r0.3": ("cook_torrance", {"roughness": 0.3, "specular": 1.0}),
-    "dcos dielectric r0.6": ("walter_reflection", {"roughness": 0.6, "sampler": "dcos",
-                                                   "fresnel_type": "dielectric"}),
+    "dcos dielectric separable r0.6": ("walter_reflection", {"roughness": 0.6, "sampler": "dcos",
+                                                             "masking": "separable",
+                                                             "fresnel_type": "dielectric"}),
 }
 WI = normalize(np.array([0.35, -0.3, 0.7]))
 

@@ -1,12 +1,11 @@
 """The light-sampled split (addon/lab/reference/split.py, twin of osl/microfacet.h): the native
-part c(wi) F_n f_ggx must stay under the model for every reachable wo, or Cycles would drop the
+part c(wi) F f_ggx must stay under the model for every reachable wo, or Cycles would drop the
 residual's negative weights and the render would be too dark; the residual sampler must carry
-exactly f - c F_n f_ggx; a conductor's native closure (Cycles' conductor_bsdf) must carry our
-Fresnel; the OSL constants must be the numpy ones.
+exactly f - c F f_ggx; the native closures must carry our Fresnel; the OSL constants must be
+the numpy ones.
 
-What this catches: a Fresnel minimum that misses a dip (dielectrics seen from inside near the
-critical angle), a wrong reachable range of wi.h, a masking bound that is not a bound
-(separable), a residual weight that forgets a factor, a native Fresnel that is not ours."""
+What this catches: a masking bound that is not a bound (separable), a residual weight that
+forgets a factor, a native Fresnel (Cycles' conductor_bsdf, dielectric_bsdf) that is not ours."""
 import re
 from pathlib import Path
 
@@ -20,14 +19,6 @@ from addon.lab.reference.microfacet import normalize
 ROOT = Path(__file__).resolve().parent.parent
 NS = np.exp(np.linspace(np.log(0.001), np.log(100.0), 41))  # the catalog's range of N
 KS = np.concatenate([[0.0, 1e-4, 1e-2], np.exp(np.linspace(np.log(0.05), np.log(100.0), 25))])
-LOS = (0.0, 0.05, 0.3, 0.7071, 0.95)
-X = np.concatenate([np.linspace(0.0, 1e-3, 2001), np.linspace(1e-3, 0.99, 20001),
-                    np.linspace(0.99, 1.0, 20001)])
-
-
-def _dense_min(F, lo):
-    x = X[X >= lo]
-    return F(x).min(axis=0)
 
 
 def _cycles_conductor_fresnel_f32(c, n, k):
@@ -67,34 +58,40 @@ def test_cycles_conductor_fresnel_is_the_exact_formula_to_float_rounding():
     assert np.abs(schlick - exact)[far].max() > 1e-2
 
 
-@pytest.mark.parametrize("lo", LOS)
-def test_dielectric_fresnel_minimum_on_both_sides_of_the_interface(lo):
-    eta = np.exp(np.linspace(np.log(0.01), np.log(100.0), 401))
-    lo_v = np.maximum(lo, split.critical_cos(eta))
-    xc = split.critical_cos(eta)[None, :] * 1.0
-    found = split.fresnel_min(lambda x: fresnel_dielectric(x, eta), lo_v[None, :] * 1.0, 1.0, xc)[0]
-    dense = _dense_min(lambda x: fresnel_dielectric(x[:, None], eta), lo)
-    assert np.all(found <= dense + 1e-15)  # eta = 1 + 1e-15 reflects 1e-31: rounding only
-    resolved = (eta >= 1.0) | (1.0 - split.critical_cos(eta) > 0.05)
-    assert np.all((found >= dense * (1.0 - 3e-4))[resolved])
-    # Inside a dense medium the minimum is not F(1) (the dip by Brewster's angle).
-    assert np.any(dense < fresnel_dielectric(1.0, eta) * (1 - 1e-3))
+def _cycles_dielectric_fresnel_f32(c, eta):
+    """Cycles' dielectric Fresnel (kernel/closure/bsdf_util.h, fresnel_dielectric_polarized),
+    transcribed in float32: eta cos_t from Snell's law, total internal reflection where
+    eta^2 - sin^2 <= 0, the two polarised reflectances averaged."""
+    f = np.float32
+    c, eta = f(c), f(eta)
+    g2 = eta * eta - (f(1) - c * c)
+    g = np.sqrt(np.maximum(g2, f(0)))
+    with np.errstate(invalid="ignore", divide="ignore"):  # c = g = 0: taken by the TIR branch
+        rs = ((c - g) / (c + g)) ** 2
+        rp = ((eta * eta * c - g) / (eta * eta * c + g)) ** 2
+    return np.where(g2 <= 0, 1.0, (f(0.5) * (rs + rp)).astype(float))
 
 
-def test_reachable_range_is_the_least_wi_dot_h():
-    rng = np.random.default_rng(3)
-    wi = normalize(rng.normal(size=(400, 3)) * [1, 1, 1])
-    wi[:, 2] = np.abs(wi[:, 2])
-    wo = normalize(rng.normal(size=(4000, 3)))
-    wo[:, 2] = np.abs(wo[:, 2])
-    h = normalize(wi[:, None] + wo[None])
-    least = np.einsum("ijk,ik->ij", h, wi).min(axis=1)
-    lo = split.reachable_cos_lo(wi)
-    assert np.all(least >= lo - 1e-12)
-    # The bound is reached: wo on the horizon opposite wi.
-    opposite = normalize(np.stack([-wi[:, 0], -wi[:, 1], np.zeros(len(wi))], axis=1))
-    h = normalize(wi + opposite)
-    assert np.allclose(np.einsum("ij,ij->i", h, wi), lo, atol=1e-9)
+def test_cycles_dielectric_fresnel_is_the_exact_formula_to_float_rounding():
+    """The split hands a dielectric's reflection to Cycles' dielectric_bsdf, so its Fresnel
+    must be ours, from outside and from inside (total internal reflection included): within
+    1e-4 of the exact double formula over IOR 0.01-100 (the catalog's range) and every angle
+    (measured 5.4e-5, just past a critical angle, where F has a square-root cusp and float
+    rounding of eta cos_t shows; 5e-7 at the 99.9th percentile), away from grazing incidence on
+    an index-matched interface, where both float forms cancel. A Schlick approximation is off by
+    more than 1e-2."""
+    eta = np.exp(np.linspace(np.log(0.01), np.log(100.0), 201))
+    x = np.concatenate([np.linspace(0.0, 1e-3, 101), np.linspace(1e-3, 1.0, 1501)])
+    e, c = np.meshgrid(eta, x, indexing="ij")
+    exact = fresnel_dielectric(c, e)
+    with np.errstate(all="ignore"):
+        cycles = _cycles_dielectric_fresnel_f32(c, e)
+    far = ~((np.abs(e - 1.0) < 0.05) & (c < 0.05))
+    err = np.abs(cycles - exact)[far]
+    assert np.all(np.isfinite(err)) and err.max() < 1e-4, err.max()
+    F0 = exact[:, -1:]
+    schlick = F0 + (1.0 - F0) * (1.0 - c) ** 5
+    assert np.abs(schlick - exact)[far & (e > 1)].max() > 1e-2
 
 
 def random_values(rng, model_id):
@@ -183,9 +180,6 @@ def test_osl_constants_match_the_twin():
         return float(re.search(rf"#define {name} (\S+)", header).group(1))
 
     assert define("MFL_ALPHA_SPLIT_MIN") == split.ALPHA_SPLIT_MIN
-    assert define("MFL_MIN_SEARCH_STEPS") == split.MIN_SEARCH_STEPS
-    assert define("MFL_FRESNEL_MARGIN") == split.FRESNEL_MARGIN
-    assert abs(define("MFL_GOLDEN") - split._GOLDEN) < 1e-15
 
 
 def test_one_part_per_sample_keeps_the_sum():
@@ -201,3 +195,26 @@ def test_one_part_per_sample_keeps_the_sum():
     expected = q[:, None] * np.where(q[:, None] > 0, w_n / np.maximum(q, 1e-300)[:, None], 0) + \
         (1 - q)[:, None] * np.where(q[:, None] < 1, w_r / np.maximum(1 - q, 1e-300)[:, None], 0)
     assert np.allclose(expected, w_n + w_r)
+
+
+def test_separable_residual_over_its_probability_stays_bounded():
+    """Walter reflection picks the residual with probability 1 - c (c = G_lo = G1(wi)): for
+    separable masking G2 - c G2_hc = (1 - c) G1(wo) G2_hc exactly, so the residual's weight over
+    its probability never exceeds the height-correlated lobe's (no rare heavy sample), and the
+    probability is 0 where the residual is (height-correlated masking, normal incidence). It
+    would catch a part choice whose residual weight can blow up as c approaches 1."""
+    rng = np.random.default_rng(8)
+    for roughness in (0.1, 0.5, 1.0):
+        sep = make_bsdf("walter_reflection", {"roughness": roughness, "masking": "separable"})
+        wi = normalize(rng.normal(size=(4000, 3)))
+        wi[:, 2] = np.abs(wi[:, 2])
+        wo = normalize(rng.normal(size=(4000, 3)))
+        wo[:, 2] = np.abs(wo[:, 2])
+        h = normalize(wi + wo)
+        mf = sep.mf
+        g2, g2_hc = mf.G2(wi, wo, h, "separable"), mf.G2(wi, wo, h, "height_correlated")
+        p_r = split.residual_probability(sep, wi)
+        assert np.allclose(g2 - (1.0 - p_r) * g2_hc, p_r * mf.G1(wo, h) * g2_hc, atol=1e-12)
+        hc = make_bsdf("walter_reflection", {"roughness": roughness})
+        assert np.all(split.residual_probability(hc, wi) == 0.0)
+    assert split.residual_probability(sep, np.array([0.0, 0.0, 1.0])) == 0.0

@@ -2,51 +2,46 @@
 non-negative stochastic residual (the twin of the split in osl/microfacet.h and the Walter
 shaders; design and measurements: docs/light-sampling.md).
 
-    f(wi, wo) = c(wi) F_n(wi.h) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
+    f(wi, wo) = c(wi) F(wi.h) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
 
-f_ggx is height-correlated Smith GGX with F = 1 and the model's own alphas, which is exactly
-Cycles' `microfacet("ggx", N, U, ax, ay, 0, 0)`; F_n is the Fresnel factor the native closure
-carries itself: a conductor's F for Cycles' `conductor_bsdf(N, U, ax, ay, n, k, "ggx")`, whose
-Fresnel is the same closed form as fresnel_conductor (tests/test_reference_split.py holds a
-float32 transcription of Cycles' polarised formula to it), else 1. Cycles light-samples the
-native part (lamps, world, emissive meshes, with multiple importance sampling). The residual r
-is the stochastic delta lobe of the model's own sampler, weighted by (f - native) cos / pdf. It
-must never be negative, because Cycles drops negative closure weights; so c(wi) is a lower
-bound of f / (F_n f_ggx) over every wo a reflection can reach from wi, per RGB channel:
+f_ggx is height-correlated Smith GGX with F = 1 and the model's own alphas, Cycles'
+`microfacet("ggx", N, U, ax, ay, 0, 0)`; with the model's own Fresnel factor F it is Cycles'
+`conductor_bsdf(N, U, ax, ay, n, k, "ggx")` for a conductor and `dielectric_bsdf(N, U, 1, 0,
+ax, ay, eta, "ggx")` (no transmission) for a dielectric or glass's reflection: the same closed
+forms (tests/test_reference_split.py holds float32 transcriptions of Cycles' formulas to ours).
+Cycles light-samples this native part (lamps, world, emissive meshes, with multiple importance
+sampling). The residual r is the stochastic delta lobe of the model's own sampler, weighted by
+(f - native) cos / pdf. It must never be negative, because Cycles drops negative closure
+weights; so c(wi) is a lower bound of f / (F f_ggx) over every wo, per RGB channel:
 
-    f / (F_n f_ggx) = tint (F(wi.h) / F_n(wi.h)) G2(wi, wo) / G2_hc(wi, wo)
-    c(wi)           = tint F_lo(wi) G_lo(wi)
+    f / (F f_ggx) = tint G2(wi, wo) / G2_hc(wi, wo)
+    c(wi)         = tint G_lo(wi)
 
-- F_lo: 1 for a conductor (F / F_n = 1) and for F = 1 (none); for a dielectric, the least
-  Fresnel factor over the reachable wi.h in [cos(pi/4 + theta_i/2), 1] (wo on the horizon
-  opposite wi gives the lowest), found by a golden-section search (dielectric Fresnel is
-  unimodal in wi.h on each side of the critical angle; tests/test_reference_split.py checks it
-  on dense grids) and lowered by a relative margin that covers the search's resolution and float
-  rounding.
-- G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) = 1 / (1 + Li)
-  (Heitz 2014 eqs. 98, 99; approached as wo grazes).
-So a height-correlated conductor (or F = 1) has no residual at all: it is Cycles' closure.
-Beckmann has no such bound (its tail falls faster than GGX's), so it stays stochastic.
+G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) = 1 / (1 + Li)
+(Heitz 2014 eqs. 98, 99; approached as wo grazes). So a height-correlated GGX reflection has no
+residual at all: it is Cycles' closure. Beckmann has no such bound (its tail falls faster than
+GGX's, and Cycles' Beckmann is not exact), so it stays stochastic.
 
-The shader returns one of the two parts per sample, never both (`split_closures` in
-microfacet.h, `selection_probability` here): when Cycles samples a singular closure it adds the
-other closures' values in that direction with the balance heuristic and a singular pdf of 1e6,
-which biases a sharp native lobe beside a delta residual. Choosing the part with probability
-q = a / (a + r) (a, r the channel sums of the two weights) and dividing by q keeps the sum
-exact, and gives both choices the same total weight.
+The shader returns one of the two reflection parts per sample, never both: when Cycles samples
+a singular closure it adds the other closures' values in that direction with the balance
+heuristic and a singular pdf of 1e6, which biases a sharp native lobe beside a delta residual.
+Walter reflection picks the residual with probability 1 - c (`residual_probability`): for
+separable masking F (G2 - c G2_hc) = (1 - c) F G1(wo) G2_hc exactly, so the residual's weight
+over 1 - c stays bounded, and the native part's is c / c = 1. Heitz 2016's walk picks with
+q = a / (a + r) (`split_closures` in microfacet.h, `selection_probability` here).
 
-Glass splits its reflection lobe the same way (the transmission stays stochastic): the lobe is
-chosen with probability F, so the residual's reflection weight is G2 - (c / F) G2_hc per unit
-of the stochastic factor.
+Glass splits its reflection lobe the same way. Its stochastic part takes the residual
+reflection alone with probability F (1 - c) / 2, else the transmission (weight (1 - F) G2 over
+the probability) together with the native reflection (weight c over the probability): a
+reflection and a refraction lie in opposite hemispheres, so neither has a value where the other
+points. With height-correlated masking (c = 1) the reflection is all native.
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
 from .bsdf import MicrofacetBRDF
-from .fresnel import fresnel_conductor, fresnel_dielectric
+from .fresnel import fresnel_dielectric
 from .glass import MicrofacetGlass
 from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
@@ -54,82 +49,17 @@ ESTIMATORS = ("light_sampled", "stochastic")
 # Below this alpha (roughness 0.032) the lobe is nearly a mirror: Cycles' near-specular GGX and
 # our delta lobe would meet in a region nobody can light-sample; stay stochastic.
 ALPHA_SPLIT_MIN = 1e-3
-# Golden-section steps for the Fresnel minimum: the bracket shrinks to 0.618^16 = 4.6e-4 of
-# the searched interval, so the value found exceeds the true minimum by ~F'' 3e-8 (F'' the
-# curvature over that interval). Each step is one Fresnel evaluation per channel and side, the
-# split's main cost per shading point (24 steps made the split twice as costly as native GGX).
-MIN_SEARCH_STEPS = 16
-# Relative margin under the minimum found: covers the search and float32 rounding in OSL.
-FRESNEL_MARGIN = 1e-4
-_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
-
-
-def reachable_cos_lo(wi):
-    """Least wi.h over reflected directions wo (wo.z >= 0): wo on the horizon opposite wi,
-    at angle pi/2 + theta_i from wi, so wi.h = cos(pi/4 + theta_i / 2)."""
-    theta = np.arccos(np.clip(np.asarray(wi, dtype=float)[..., 2], -1.0, 1.0))
-    return np.maximum(np.cos(0.25 * math.pi + 0.5 * theta), 0.0)
-
-
-def fresnel_min(F, lo, hi=1.0, origin=None, steps: int = MIN_SEARCH_STEPS):
-    """min of a unimodal F(x) over x in [lo, hi], by golden section in t = sqrt(|x - origin|)
-    (the OSL twin runs the same steps): the smallest value visited, times
-    (1 - FRESNEL_MARGIN). `origin` is the critical angle's cosine at one end of the interval
-    (default lo), where F has a square-root cusp that t makes smooth. lo, hi, origin (..., 3)."""
-    lo = np.asarray(lo, dtype=float)
-    hi = np.broadcast_to(hi, lo.shape) * 1.0
-    origin = lo if origin is None else np.broadcast_to(origin, lo.shape) * 1.0
-    # x = origin + sign t^2, t from a to b: sign +1 when origin is the lower end, else -1.
-    sign = np.where(np.abs(hi - origin) >= np.abs(lo - origin), 1.0, -1.0)
-
-    def G(t):
-        return F(np.clip(origin + sign * t * t, lo, hi))
-
-    a = np.sqrt(np.abs(np.where(sign > 0, lo, hi) - origin))
-    b = np.sqrt(np.abs(np.where(sign > 0, hi, lo) - origin))
-    x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
-    f1, f2 = G(x1), G(x2)
-    best = np.minimum(G(a), G(b))
-    for _ in range(steps):
-        best = np.minimum(best, np.minimum(f1, f2))
-        left = f1 < f2  # the minimum lies in [a, x2], else in [x1, b]
-        a, b = np.where(left, a, x1), np.where(left, x2, b)
-        xn = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
-        fn = G(xn)
-        x1, f1, x2, f2 = (np.where(left, xn, x2), np.where(left, fn, f2),
-                          np.where(left, x1, xn), np.where(left, f1, fn))
-    best = np.minimum(best, np.minimum(f1, f2))
-    return best * (1.0 - FRESNEL_MARGIN)
-
-
-def critical_cos(eta):
-    """cos of the critical angle of total internal reflection (0 for eta >= 1): left of it F is
-    a plateau at 1, which only rounding would tilt, so the search starts there."""
-    eta = np.asarray(eta, dtype=float)
-    return np.sqrt(np.maximum(1.0 - eta * eta, 0.0))
-
-
-def fresnel_lower_bound(bsdf, wi):
-    """F_lo(wi) (..., 3): the least of F / F_n over the wi.h a reflection can reach (1 where
-    the native closure carries the model's own Fresnel, or there is none)."""
-    wi = np.asarray(wi, dtype=float)
-    lo = reachable_cos_lo(wi)[..., None] * np.ones(3)
-    if isinstance(bsdf, MicrofacetGlass) or bsdf.fresnel == "dielectric":
-        # Monotone for eta > 1; inside a denser medium (eta < 1) it dips near Brewster's angle,
-        # right of the total-internal-reflection plateau F = 1.
-        eta = bsdf.eta if isinstance(bsdf, MicrofacetGlass) else bsdf.ior
-        xc = critical_cos(eta) * np.ones_like(lo)
-        return fresnel_min(lambda x: fresnel_dielectric(x, eta), np.maximum(lo, xc), 1.0, xc)
-    return np.ones_like(lo)
 
 
 def native_fresnel(bsdf, cos_i):
-    """F_n (..., 3): the Fresnel factor the native closure carries itself at wi.h = cos_i: a
-    conductor's F (Cycles' conductor_bsdf), else 1 (microfacet("ggx") has none)."""
+    """F_n (..., 3): the Fresnel factor the native closure carries at wi.h = cos_i, the model's
+    own: a conductor's (Cycles' conductor_bsdf), a dielectric's (dielectric_bsdf with no
+    transmission; glass: its reflection lobe's, eta from the side of wi), 1 for none
+    (microfacet("ggx"))."""
     cos_i = np.asarray(cos_i, dtype=float)
-    if isinstance(bsdf, MicrofacetBRDF) and bsdf.fresnel == "conductor":
-        return fresnel_conductor(cos_i[..., None], bsdf.n, bsdf.k)
-    return np.ones(cos_i.shape + (3,))
+    if isinstance(bsdf, MicrofacetGlass):
+        return fresnel_dielectric(cos_i, bsdf.eta)[..., None] * np.ones(3)
+    return bsdf.F(cos_i)
 
 
 def masking_lower_bound(bsdf, wi):
@@ -154,12 +84,12 @@ def supports_split(bsdf) -> bool:
 
 
 def native_factor(bsdf, wi):
-    """c(wi) / tint (..., 3) = F_lo G_lo: the native closure's weight without the tint; 0 below
-    the horizon and for BSDFs the split does not support."""
+    """c(wi) / tint (..., 3) = G_lo: the native closure's weight without the tint; 0 below the
+    horizon and for BSDFs the split does not support."""
     wi = np.asarray(wi, dtype=float)
     if not supports_split(bsdf):
         return np.zeros(wi.shape[:-1] + (3,))
-    c = fresnel_lower_bound(bsdf, wi) * masking_lower_bound(bsdf, wi)[..., None]
+    c = masking_lower_bound(bsdf, wi)[..., None] * np.ones(3)
     return np.where((wi[..., 2] > 0.0)[..., None], c, 0.0)
 
 
@@ -188,15 +118,15 @@ def eval_residual(bsdf, wi, wo):
 
 def residual_weight_reflection(bsdf, wi, wo, m, inv_pdf_factor):
     """The residual's reflection sample weight (..., 3), as the OSL computes it:
-    tint inv_pdf_factor (F G2 - c' F_n G2_hc), c' = F_lo G_lo (no tint), clamped at 0 against
+    tint inv_pdf_factor F (G2 - c' G2_hc), c' = G_lo (no tint; F_n = F), clamped at 0 against
     rounding. inv_pdf_factor is the sampler's f cos / (F G2 pdf) (bsdf.py `sample`)."""
     mf = bsdf.mf
     g2 = mf.G2(wi, wo, m, bsdf.masking)[..., None]
     g2_hc = mf.G2(wi, wo, m, "height_correlated")[..., None]
     F = bsdf.F(dot(wi, m))
-    F_n = native_fresnel(bsdf, dot(wi, m))
-    w = np.asarray(inv_pdf_factor)[..., None] * (F * g2 - native_factor(bsdf, wi) * F_n * g2_hc)
-    return bsdf.tint * np.maximum(w, 0.0)
+    w = np.asarray(inv_pdf_factor)[..., None] * np.maximum(g2 - native_factor(bsdf, wi) * g2_hc,
+                                                           0.0)
+    return bsdf.tint * F * w
 
 
 def sample_residual(bsdf, wi, u):
@@ -233,6 +163,12 @@ def albedo_share(bsdf, wi, n: int = 1 << 16, seed: int = 0):
              / np.maximum(E, 1e-30) ** 2 - 2 * cov / np.maximum(E * E_ggx, 1e-30))
     err = np.abs(share) * np.sqrt(np.maximum(var_r, 0.0) / n)
     return share, err
+
+
+def residual_probability(bsdf, wi):
+    """The probability (...,) that Walter reflection's shader returns the residual rather than
+    the native part: 1 - c (c = G_lo, so 0 for height-correlated masking)."""
+    return 1.0 - native_factor(bsdf, wi)[..., 0]
 
 
 def selection_probability(w_native, w_residual):
