@@ -1,5 +1,5 @@
 """Section "light sampling": the share of each model's directional albedo that the light-sampled
-split hands to Cycles' native GGX closure (addon/lab/reference/split.py), per roughness and
+split hands to Cycles' native GGX closure (its Fresnel included; addon/lab/reference/split.py), per roughness and
 incidence, with Monte Carlo standard errors; numpy only."""
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ def page(cfg, rows, res) -> list:
     head = " | ".join(f"{t:g} deg" for t in data["thetas"])
     lines = ["## Light sampling: the share Cycles light-samples", "",
              "Share of the directional albedo carried by Cycles' native GGX closure in the "
-             "Native + Residual estimator (`c E_ggx / E`, addon/lab/reference/split.py, "
+             "Native + Residual estimator (`c E_n / E`, E_n the native closure's albedo, Fresnel included; addon/lab/reference/split.py, "
              f"{data['samples']:,} Monte Carlo samples per entry; the largest standard error is "
              "given per row). Per channel R/G/B where they differ. The residual carries the "
              "rest, its direction aimed partly at the lamps the add-on hands over; models that "
