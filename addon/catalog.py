@@ -206,10 +206,10 @@ MASKING_DOC = ("How microfacets shadow one another: Height-correlated as in Cycl
 # Same converged image either way: only the noise changes (docs/light-sampling.md).
 ESTIMATOR = Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
                   doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky "
-                      "for most of a GGX reflection, and aims the rest (all of a Beckmann one) "
-                      "at the scene's lamps, so highlights from small lamps clear up fast. "
-                      "Stochastic finds lamps only by chance. Both converge to the same "
-                      "image.")
+                      "for a GGX reflection (all of it with Height-Correlated masking), and "
+                      "aims the rest (all of a Beckmann one) at the scene's lamps, so "
+                      "highlights from small lamps clear up fast. Stochastic finds lamps only "
+                      "by chance. Both converge to the same image.")
 
 MODELS: dict[str, Model] = {}
 
@@ -374,13 +374,13 @@ HEITZ2016 = _add(Model(
               doc="How many bounces on the microsurface light may make before it is given up "
                   "(that light is lost, so low values darken rough surfaces): 1 is single "
                   "scattering; at 100 less than 1 in 100,000 paths is lost."),
-        # The first order is Cycles' GGX exactly (docs/models.md, sec. 5); later bounces stay
-        # stochastic and are not aimed at the lamps.
+        # The first order is Cycles' GGX exactly (docs/models.md, sec. 5); a metal's later
+        # bounces are aimed at the handed-over lamps, glass's are not.
         Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
               doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky for "
-                  "the first bounce of a GGX surface, most of its light; later bounces find "
-                  "lamps by chance. Stochastic finds all of it by chance. Both converge to the "
-                  "same image."),
+                  "the first bounce of a GGX surface, most of its light; a metal's later "
+                  "bounces are aimed at the scene's lamps, glass's find lamps by chance. "
+                  "Stochastic finds all of it by chance. Both converge to the same image."),
     ),
 ))
 

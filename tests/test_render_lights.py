@@ -178,8 +178,10 @@ AIMED_ROW = [
                "Beckmann gold r0.5"),
     SphereSpec("walter_reflection", {"roughness": 0.6, "masking": "separable"},
                "gold separable r0.6"),
+    # (separable: a height-correlated dielectric is all native, dielectric_bsdf, no residual)
     SphereSpec("walter_reflection", {"roughness": 0.5, "fresnel_type": "dielectric",
-                                     "sampler": "dcos"}, "dielectric D cos r0.5"),
+                                     "sampler": "dcos", "masking": "separable"},
+               "dielectric D cos separable r0.5"),
 ]
 
 

@@ -45,7 +45,8 @@ def paired_band_stats(layout, a, b):
 def renders(request):
     env = grid.ENVIRONMENTS[request.param]
     kinds = list(NATIVE)
-    specs = [SphereSpec("walter_reflection", {**OURS[k], "roughness": r, "sampler": "vndf"},
+    specs = [SphereSpec("walter_reflection", {**OURS[k], "roughness": r, "sampler": "vndf",
+                                              "estimator": "stochastic"},
                         f"{k} r={r}") for k in kinds for r in ROUGHNESS]
     separable = [SphereSpec(s.model_id, {**s.values, "masking": "separable"}, s.label + " sep")
                  for s in specs]

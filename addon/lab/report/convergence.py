@@ -14,7 +14,7 @@ from .config import (AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP,
                      SUN_ANGLE_DEG, SUN_DIRECTION, SUN_STRENGTH, SUN_WORLD, TARGET)
 from .plotting import SAMPLER_STYLE, _plt, to_display
 from .references import reference_image, relative_rmse
-from .rows import eval_is_fast, specs_for, twin
+from .rows import RATIO_TO, eval_is_fast, specs_for, twin
 from .scenes import build_env_scene, calibrate_sun, cone_radiance, set_border
 
 
@@ -120,7 +120,8 @@ def time_to_target(points, target=TARGET):
 
 
 def time_table(conv, rows) -> list:
-    """Per env and row: time to TARGET and its ratio to the native closure of the variant."""
+    """Per env and row: time to TARGET and its ratio to the native closure of the variant (or of
+    the variant RATIO_TO names)."""
     table = []
     for env_key, data in conv["envs"].items():
         env_rows = [row for row in rows if row.key in data["series"]]
@@ -128,7 +129,7 @@ def time_table(conv, rows) -> list:
         native = {row.variant: times[row.key][0] for row in env_rows if row.sampler == "native"}
         for row in env_rows:
             t, how = times[row.key]
-            nat = native.get(row.variant)
+            nat = native.get(RATIO_TO.get(row.variant, row.variant))
             ratio = t / nat if nat and math.isfinite(t) and math.isfinite(nat) else None
             last = data["series"][row.key][-1]
             table.append({"env": env_key, "row": row.key, "variant": row.variant,

@@ -24,16 +24,24 @@ class Row:
     native_kind: str | None = None
 
 
-# Model variants whose native Cycles closure is the same BSDF (height-correlated Smith G2).
+# Model variants and the native Cycles closure for the same BSDF (height-correlated Smith G2),
+# None where there is none.
 VARIANTS = {
     "cook_torrance": [("Cook-Torrance gold", {"specular": 1.0, **GOLD}, None)],
     "walter_reflection": [
         ("Walter GGX F=1", {"distribution": "ggx", "fresnel_type": "none"}, "ggx"),
         ("Walter Beckmann F=1", {"distribution": "beckmann", "fresnel_type": "none"}, "beckmann"),
         ("Walter GGX gold", {"distribution": "ggx", **GOLD}, "conductor"),
+        # Separable masking is not Cycles' BSDF: its row is held to its own numpy reference,
+        # and timed against Cycles' conductor (the closest native closure) in the same run.
+        ("Walter GGX gold separable", {"distribution": "ggx", "masking": "separable", **GOLD},
+         None),
     ],
     "walter_glass": [("Walter GGX glass 1.5", {"distribution": "ggx", "ior": 1.5}, "glass")],
 }
+
+# Variants without a native closure of their own, timed against another variant's.
+RATIO_TO = {"Walter GGX gold separable": "Walter GGX gold"}
 
 NATIVE_TWIN = {
     "ggx": ("walter_reflection", {"distribution": "ggx", "fresnel_type": "none"}),
