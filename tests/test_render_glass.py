@@ -153,3 +153,41 @@ def test_stress_grid_has_no_nan_inf_or_negative_pixel():
                                             materials=makers, solid=True, max_bounces=32)
     assert np.isfinite(image).all(), "NaN or Inf pixels"
     assert (image >= 0).all(), "negative pixels"
+
+
+def _lookdev_glass_centre(estimator, seed):
+    """The look-dev view of the rough_glass preset (a closed, concave Suzanne: refraction in,
+    internal reflections, refraction out) under its sky alone, no clamps: the image centre."""
+    from addon import presets
+    from addon.catalog import MODELS
+    from addon.lab import lookdev
+
+    preset = presets.find("rough_glass")
+    values = dict(MODELS[preset.model_id].resolve(preset.params), estimator=estimator)
+    scene = lookdev.build_view(lambda: harness.model_material(preset.model_id, values, estimator),
+                               96, 72, seed=seed)
+    for obj in scene.objects:
+        if obj.type == "LIGHT":
+            obj.hide_render = True
+    scene.cycles.sample_clamp_indirect = 0.0
+    scene.cycles.blur_glossy = 0.0
+    scene.cycles.samples = 256
+    image, _ = harness.render(scene)
+    return np.asarray(image)[24:56, 28:68, :3]
+
+
+def test_native_and_stochastic_agree_inside_a_closed_glass_object():
+    """Native + Residual and Stochastic are two estimators of one model, so on a closed glass
+    object their means agree within noise. What this catches: a native part that is wrong on
+    the inside of glass. Cycles' dielectric_bsdf reflection on back faces (eta < 1) rendered
+    this view 22% darker than Stochastic (sky alone; 41% with the look-dev's lamps) while every
+    sphere-grid test passed, so the split is now used entering the glass only. Noise: the
+    per-pixel differences of the two independent renders."""
+    a = _lookdev_glass_centre("light_sampled", 1)
+    b = _lookdev_glass_centre("stochastic", 2)
+    assert np.isfinite(a).all() and np.isfinite(b).all()
+    d = (a - b).mean(axis=-1).ravel()
+    se = d.std(ddof=1) / np.sqrt(d.size)
+    mean = float(b.mean())
+    assert abs(d.mean()) < 4.0 * se, (d.mean(), se, mean)
+    assert 4.0 * se < 0.05 * mean, (se, mean)  # power: a 5% difference would show

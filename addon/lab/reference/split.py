@@ -72,12 +72,13 @@ def masking_lower_bound(bsdf, wi):
 
 def supports_split(bsdf) -> bool:
     """Whether the light-sampled estimator splits this BSDF (else it renders stochastically):
-    GGX, rough enough, and not the index-matched glass."""
+    GGX, rough enough, and not the index-matched glass nor glass seen from its denser side
+    (eta < 1: osl/walter_glass.osl says why)."""
     if not isinstance(bsdf, (MicrofacetBRDF, MicrofacetGlass)):
         return False
     if isinstance(bsdf, MicrofacetBRDF) and bsdf.masking == "vcavity":
         return False
-    if isinstance(bsdf, MicrofacetGlass) and bsdf.is_passthrough:
+    if isinstance(bsdf, MicrofacetGlass) and (bsdf.is_passthrough or bsdf.eta <= 1.0):
         return False
     mf = bsdf.mf
     return mf.ggx and not mf.delta and min(mf.alpha_x, mf.alpha_y) >= ALPHA_SPLIT_MIN
