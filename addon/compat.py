@@ -13,6 +13,12 @@ import bpy
 # trees (4.x offers neither: enums stay integer sockets there).
 MENU_SOCKETS = bpy.app.version >= (5, 0, 0)
 
+# Blender 5.0 (Cycles commit "Add polarized fresnel function for conductors", August 2025):
+# conductor_bsdf evaluates the exact conductor Fresnel; 4.x uses a fast approximation that
+# rendered a Walter gold sphere up to 0.4% too bright in a white furnace (z = 20, 4.2.23), so
+# there the light-sampled split gives a conductor no native part (docs/light-sampling.md).
+EXACT_CONDUCTOR_FRESNEL = bpy.app.version >= (5, 0, 0)
+
 
 def expose_bundled_modules() -> None:
     """Put the wheel's own oslquery and OpenImageIO on sys.path (Blender 4.4+; inside a Blender

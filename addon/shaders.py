@@ -28,6 +28,16 @@ def enum_defines() -> str:
     return "\n".join(lines) + "\n"
 
 
+def version_defines() -> str:
+    """What the shaders need to know of the Blender they run in (addon/compat.py): whether
+    Cycles' conductor_bsdf is exact. Without bpy (numpy-only use): the current release's."""
+    try:
+        from .compat import EXACT_CONDUCTOR_FRESNEL
+    except ImportError:
+        EXACT_CONDUCTOR_FRESNEL = True
+    return f"#define MFL_EXACT_CONDUCTOR {int(EXACT_CONDUCTOR_FRESNEL)}\n"
+
+
 def _osl_value(param, value) -> str:
     if param.kind == COLOR:
         return "color({:.9g}, {:.9g}, {:.9g})".format(*value)
@@ -93,8 +103,8 @@ def shader_source(model: Model, lamps=()) -> str:
     source = source.replace("    // @clamp_parameters", clamp_statements(model))
     source = _inline_headers(source, set())
     source = source.replace("// @lamps", lamp_table.osl_block(lamps))
-    # The enum codes precede everything, headers included.
-    return enum_defines() + source
+    # The enum codes and version facts precede everything, headers included.
+    return enum_defines() + version_defines() + source
 
 
 def uses_lamps(model: Model) -> bool:

@@ -420,12 +420,109 @@ float sample_reflection(int sampler, int dist, int masking, vector wi, float ax,
 // Below this alpha the lobe is nearly a mirror: stay stochastic (split.ALPHA_SPLIT_MIN).
 #define MFL_ALPHA_SPLIT_MIN 1e-3
 
+// Blender 4.x only (MFL_EXACT_CONDUCTOR 0): Cycles' conductor_bsdf approximates the conductor
+// Fresnel there, so a conductor's native part is microfacet("ggx") times F_lo, the least
+// conductor Fresnel over the reachable wi.h, found by a golden-section search
+// (split.conductor_lower_bound; tests/test_reference_split.py checks it on dense grids).
+#define MFL_MIN_SEARCH_STEPS 16
+#define MFL_FRESNEL_MARGIN 1e-4
+#define MFL_CUSP_K 1.0
+#define MFL_GOLDEN 0.61803398874989485
+
+// Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
+float reachable_cos_lo(vector wi)
+{
+    return max(cos(0.25 * MFL_PI + 0.5 * acos(clamp(wi[2], -1.0, 1.0))), 0.0);
+}
+
+// cos of the critical angle (0 for eta >= 1): F is a plateau at 1 left of it.
+float critical_cos(float eta) { return sqrt(max(1.0 - eta * eta, 0.0)); }
+
+float fresnel_of(int fresnel_type, float x, float ior, float n, float k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return fresnel_conductor(x, n, k);
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return fresnel_dielectric(x, ior);
+    return 1.0;
+}
+
+// x = origin + sign t^2, clamped to [lo, hi]: the search variable of fresnel_min.
+float fresnel_at(int fresnel_type, float t, float origin, float sign, float lo, float hi,
+                 float ior, float n, float k)
+{
+    return fresnel_of(fresnel_type, clamp(origin + sign * t * t, lo, hi), ior, n, k);
+}
+
+// Golden-section minimum of the (unimodal) Fresnel factor over x in [lo, hi], searched in
+// t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
+// F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
+// (split.fresnel_min, the same steps).
+float fresnel_min(int fresnel_type, float lo, float hi, float origin, float ior, float n, float k)
+{
+    float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
+    float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
+    float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
+    float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
+    float f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
+    float f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
+    float best = min(fresnel_at(fresnel_type, a, origin, sign, lo, hi, ior, n, k),
+                     fresnel_at(fresnel_type, b, origin, sign, lo, hi, ior, n, k));
+    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
+        best = min(best, min(f1, f2));
+        if (f1 < f2) {  // the minimum lies in [a, x2]
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - MFL_GOLDEN * (b - a);
+            f1 = fresnel_at(fresnel_type, x1, origin, sign, lo, hi, ior, n, k);
+        }
+        else {  // in [x1, b]
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + MFL_GOLDEN * (b - a);
+            f2 = fresnel_at(fresnel_type, x2, origin, sign, lo, hi, ior, n, k);
+        }
+    }
+    return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
+}
+
+// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
+// has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
+// two sides are searched apart; otherwise one search covers [lo, 1].
+float conductor_min(float lo, float n, float k)
+{
+    float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
+    float split_at = max(lo, xc);
+    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, xc, 0.0, n, k);
+    if (k <= 0.0 || xc <= lo)
+        return right;
+    return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, xc, 0.0, n, k));
+}
+
+// F_lo per channel, the least conductor Fresnel a reflection from wi can meet.
+color conductor_lower_bound(vector wi, color n, color k)
+{
+    float lo = reachable_cos_lo(wi);
+    return color(conductor_min(lo, n[0], k[0]), conductor_min(lo, n[1], k[1]),
+                 conductor_min(lo, n[2], k[2]));
+}
+
 // c / tint (split.native_factor): G_lo, the least G2 / G2_hc over wo (1 for height-correlated
 // masking, 1 / (1 + Lambda(wi)) for separable). The native closure carries the model's own
 // Fresnel factor (native_ggx), so c needs no Fresnel bound.
 float native_factor(int masking, int dist, vector wi, float ax, float ay)
 {
     return (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
+}
+
+// Whether Cycles has a native closure equal to the model's single scattering (GGX): always,
+// but for a conductor only where its conductor_bsdf is exact (MFL_EXACT_CONDUCTOR, Blender 5.0
+// on, defined by the add-on from addon/compat.py; 4.x approximates the conductor Fresnel).
+int has_native(int fresnel_type)
+{
+    return fresnel_type != MFL_FRESNEL_TYPE_CONDUCTOR || MFL_EXACT_CONDUCTOR;
 }
 
 // Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own

@@ -104,20 +104,30 @@ def test_occluder_geometry_shadows_only_its_row(layout):
             assert hit.all() if blocked else not hit.any()
 
 
+def _large_sun():
+    """(half-angle, radiance) of the large sun. Cycles' sun: strength S (irradiance at normal
+    incidence) spread uniformly over a cone of half-angle h, radiance S / (pi sin^2 h)
+    (docs/light-sampling.md)."""
+    half = math.radians(SUN_ANGLE_DEG) / 2
+    return half, SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
+
+
+def _render_lit_and_shadowed(row, layout, samples, seed):
+    """`row` twice (lit, then shadowed by the occluder) under the large sun: the image."""
+    scene = harness.new_scene()
+    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
+            for i, s in enumerate(row + row)]
+    harness.build_grid_scene(layout, mats, BLACK, samples, seed=seed)
+    add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG)
+    add_occluder(scene, row=1, layout=layout)
+    image, _ = harness.render(scene)
+    return image
+
+
 @pytest.fixture(scope="module")
 def sun_render():
-    scene = harness.new_scene()
-    specs = ROW + ROW
-    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
-            for i, s in enumerate(specs)]
-    harness.build_grid_scene(LAYOUT, mats, BLACK, SAMPLES, seed=3)
-    add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG)
-    add_occluder(scene, row=1)
-    image, _ = harness.render(scene)
-    # Cycles' sun: strength S (irradiance at normal incidence) spread uniformly over a cone of
-    # half-angle h, radiance S / (pi sin^2 h) (docs/light-sampling.md).
-    half = math.radians(SUN_ANGLE_DEG) / 2
-    radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
+    image = _render_lit_and_shadowed(ROW, LAYOUT, SAMPLES, seed=3)
+    half, radiance = _large_sun()
     lit = ROW + [None] * len(ROW)
     fine = sun_term(LAYOUT, lit, radiance, half, (24, 48))
     coarse = sun_term(LAYOUT, lit, radiance, half, (12, 24))
@@ -305,16 +315,8 @@ LEE_SAMPLES = 4096  # small cells: enough samples that a 5% bias of the brightes
 
 @pytest.fixture(scope="module")
 def lee_sun_render():
-    scene = harness.new_scene()
-    specs = LEE_ROW + LEE_ROW
-    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
-            for i, s in enumerate(specs)]
-    harness.build_grid_scene(LEE_LAYOUT, mats, BLACK, LEE_SAMPLES, seed=9)
-    add_sun(scene, strength=SUN_STRENGTH, angle_deg=SUN_ANGLE_DEG)
-    add_occluder(scene, row=1, layout=LEE_LAYOUT)
-    image, _ = harness.render(scene)
-    half = math.radians(SUN_ANGLE_DEG) / 2
-    radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
+    image = _render_lit_and_shadowed(LEE_ROW, LEE_LAYOUT, LEE_SAMPLES, seed=9)
+    half, radiance = _large_sun()
     lit = LEE_ROW + [None] * len(LEE_ROW)
     return _with_quadrature_error(LEE_LAYOUT, image, lambda n: sun_term(
         LEE_LAYOUT, lit, radiance, half, n), (16, 32))

@@ -38,10 +38,12 @@ points. With height-correlated masking (c = 1) the reflection is all native.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .bsdf import MicrofacetBRDF
-from .fresnel import fresnel_dielectric
+from .fresnel import fresnel_conductor, fresnel_dielectric
 from .glass import MicrofacetGlass
 from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
@@ -60,6 +62,94 @@ def native_fresnel(bsdf, cos_i):
     if isinstance(bsdf, MicrofacetGlass):
         return fresnel_dielectric(cos_i, bsdf.eta)[..., None] * np.ones(3)
     return bsdf.F(cos_i)
+
+
+# -- Blender 4.x only: a conductor's native part where conductor_bsdf is not exact ------------
+# There Cycles approximates the conductor Fresnel (exact from 5.0: addon/compat.py), so the
+# shader's native part for a conductor is microfacet("ggx") (no Fresnel) times c = F_lo G_lo,
+# F_lo the least conductor Fresnel over the reachable wi.h (osl/microfacet.h
+# conductor_lower_bound), and the residual F G2 - c G2_hc.
+# Golden-section steps for the Fresnel minimum: the bracket shrinks to 0.618^16 = 4.6e-4 of
+# the searched interval, so the value found exceeds the true minimum by ~F'' 3e-8 (F'' the
+# curvature over that interval). Each step is one Fresnel evaluation per channel and side, the
+# split's main cost per shading point (24 steps made the split twice as costly as native GGX).
+MIN_SEARCH_STEPS = 16
+# Below this extinction a conductor with n < 1 has a cusp at its critical angle (see
+# conductor_min); above it F is smooth there (tests/test_reference_split.py checks both).
+CUSP_K = 1.0
+# Relative margin under the minimum found: covers the search and float32 rounding in OSL.
+FRESNEL_MARGIN = 1e-4
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+
+
+def reachable_cos_lo(wi):
+    """Least wi.h over reflected directions wo (wo.z >= 0): wo on the horizon opposite wi,
+    at angle pi/2 + theta_i from wi, so wi.h = cos(pi/4 + theta_i / 2)."""
+    theta = np.arccos(np.clip(np.asarray(wi, dtype=float)[..., 2], -1.0, 1.0))
+    return np.maximum(np.cos(0.25 * math.pi + 0.5 * theta), 0.0)
+
+
+def fresnel_min(F, lo, hi=1.0, origin=None, steps: int = MIN_SEARCH_STEPS):
+    """min of a unimodal F(x) over x in [lo, hi], by golden section in t = sqrt(|x - origin|)
+    (the OSL twin runs the same steps): the smallest value visited, times
+    (1 - FRESNEL_MARGIN). `origin` is the critical angle's cosine at one end of the interval
+    (default lo), where F has a square-root cusp that t makes smooth. lo, hi, origin (..., 3)."""
+    lo = np.asarray(lo, dtype=float)
+    hi = np.broadcast_to(hi, lo.shape) * 1.0
+    origin = lo if origin is None else np.broadcast_to(origin, lo.shape) * 1.0
+    # x = origin + sign t^2, t from a to b: sign +1 when origin is the lower end, else -1.
+    sign = np.where(np.abs(hi - origin) >= np.abs(lo - origin), 1.0, -1.0)
+
+    def G(t):
+        return F(np.clip(origin + sign * t * t, lo, hi))
+
+    a = np.sqrt(np.abs(np.where(sign > 0, lo, hi) - origin))
+    b = np.sqrt(np.abs(np.where(sign > 0, hi, lo) - origin))
+    x1, x2 = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+    f1, f2 = G(x1), G(x2)
+    best = np.minimum(G(a), G(b))
+    for _ in range(steps):
+        best = np.minimum(best, np.minimum(f1, f2))
+        left = f1 < f2  # the minimum lies in [a, x2], else in [x1, b]
+        a, b = np.where(left, a, x1), np.where(left, x2, b)
+        xn = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
+        fn = G(xn)
+        x1, f1, x2, f2 = (np.where(left, xn, x2), np.where(left, fn, f2),
+                          np.where(left, x1, xn), np.where(left, f1, fn))
+    best = np.minimum(best, np.minimum(f1, f2))
+    return best * (1.0 - FRESNEL_MARGIN)
+
+
+def critical_cos(eta):
+    """cos of the critical angle of total internal reflection (0 for eta >= 1): left of it F is
+    a plateau at 1, which only rounding would tilt, so the search starts there."""
+    eta = np.asarray(eta, dtype=float)
+    return np.sqrt(np.maximum(1.0 - eta * eta, 0.0))
+
+
+def conductor_min(n, k, lo):
+    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption
+    (k < CUSP_K) F has a near-plateau left of the critical angle and a cusp and dip right of
+    it, as narrow as 1e-6 in wi.h: the two sides are searched separately (k = 0: the plateau is
+    1). Otherwise F is smooth and one search covers [lo, 1]."""
+    n = np.asarray(n, dtype=float)
+    k = np.asarray(k, dtype=float)
+    xc = np.broadcast_to(np.where(k < CUSP_K, critical_cos(n), 0.0), np.shape(lo))
+    split_at = np.maximum(lo, xc)
+
+    def F(x):
+        return fresnel_conductor(x, n, k)
+
+    right = fresnel_min(F, split_at, 1.0, xc)
+    left = np.where((k > 0.0) & (xc > lo), fresnel_min(F, lo, split_at, xc), 1.0)
+    return np.minimum(left, right)
+
+
+def conductor_lower_bound(bsdf, wi):
+    """F_lo(wi) (..., 3): the least conductor Fresnel over the wi.h a reflection from wi can
+    reach (the Blender 4.x native factor's Fresnel part)."""
+    wi = np.asarray(wi, dtype=float)
+    return conductor_min(bsdf.n, bsdf.k, reachable_cos_lo(wi)[..., None] * np.ones(3))
 
 
 def masking_lower_bound(bsdf, wi):
