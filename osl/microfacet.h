@@ -488,14 +488,14 @@ float fresnel_min(int fresnel_type, float lo, float hi, float origin, float ior,
     return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
 }
 
-// Least conductor Fresnel over [lo, 1] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
+// Least conductor Fresnel over [lo, hi] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
 // has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
 // two sides are searched apart; otherwise one search covers [lo, 1].
-float conductor_min(float lo, float n, float k)
+float conductor_min(float lo, float hi, float n, float k)
 {
     float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
-    float split_at = max(lo, xc);
-    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, 1.0, xc, 0.0, n, k);
+    float split_at = min(max(lo, xc), hi);
+    float right = fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, split_at, hi, xc, 0.0, n, k);
     if (k <= 0.0 || xc <= lo)
         return right;
     return min(right, fresnel_min(MFL_FRESNEL_TYPE_CONDUCTOR, lo, split_at, xc, 0.0, n, k));
@@ -505,8 +505,80 @@ float conductor_min(float lo, float n, float k)
 color conductor_lower_bound(vector wi, color n, color k)
 {
     float lo = reachable_cos_lo(wi);
-    return color(conductor_min(lo, n[0], k[0]), conductor_min(lo, n[1], k[1]),
-                 conductor_min(lo, n[2], k[2]));
+    return color(conductor_min(lo, 1.0, n[0], k[0]), conductor_min(lo, 1.0, n[1], k[1]),
+                 conductor_min(lo, 1.0, n[2], k[2]));
+}
+
+// ---------------------------------------------------------------------------------------
+// Lamp controls (docs/light-sampling.md, "Lamp controls"; twin: reference/controls.py): a lower
+// bound of the residual's r cos = F D G / (4 wi.n) over a cone of directions wo (axis a,
+// half-angle th), for the glossy_toon closure that carries it with Cycles' light sampling
+// (lamps.h lamp_controls). Every half vector of the cone lies within beta = asin(sin(th/2) /
+// wi.h_a) of h_a = normalize(wi + a) (|wo - a| <= 2 sin(th/2), |wi + a| = 2 wi.h_a), every wo
+// within th of a; each factor is bounded on those ranges.
+
+// Least masking factor of r cos over the cone (lam_o: the largest Lambda(wo) there): G2 with no
+// native part, G2 - c G2_hc = (1 - c) G1(wo) G2_hc for separable masking beside one.
+float residual_masking_lo(int masking, int split, float lam_i, float lam_o, float cos_h_max,
+                          float cos_o_min, float wi_z, float u_hi)
+{
+    if (masking == MFL_MASKING_VCAVITY)
+        return min(1.0, 2.0 * cos_h_max * min(wi_z, cos_o_min) / u_hi);
+    if (masking == MFL_MASKING_SEPARABLE) {
+        if (split)
+            return (lam_i / (1.0 + lam_i)) / ((1.0 + lam_o) * (1.0 + lam_i + lam_o));
+        return 1.0 / ((1.0 + lam_i) * (1.0 + lam_o));
+    }
+    return split ? 0.0 : 1.0 / (1.0 + lam_i + lam_o);
+}
+
+// Least Fresnel factor over wi.h in [u_lo, u_hi]: a dielectric's falls as wi.h grows; a
+// conductor's is searched per channel.
+color fresnel_lo(int fresnel_type, float u_lo, float u_hi, float ior, color n, color k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return color(fresnel_dielectric(u_hi, ior));
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return color(conductor_min(u_lo, u_hi, n[0], k[0]), conductor_min(u_lo, u_hi, n[1], k[1]),
+                     conductor_min(u_lo, u_hi, n[2], k[2]));
+    return color(1.0);
+}
+
+// Lower bound of r cos over the cone, without the tint; 0 where the cone reaches a horizon or no
+// bound holds (split: whether the GGX native part c F f_ggx is returned beside the residual).
+color cone_value_lo(int masking, int dist, int fresnel_type, int split, vector wi, vector a,
+                    float th, float ax, float ay, float ior, color n, color k)
+{
+    vector h = normalize(wi + a);
+    float wh = dot(wi, h);
+    float s = sin(0.5 * th) / max(wh, 1e-30);
+    if (s >= 1.0 || wi[2] <= 0.0)
+        return color(0.0);
+    float beta = asin(s);
+    float theta_o = acos(clamp(a[2], -1.0, 1.0)) + th;
+    float theta_h = acos(clamp(h[2], -1.0, 1.0));
+    float h_max = theta_h + beta;
+    float gamma = acos(clamp(wh, -1.0, 1.0));
+    float u_lo = cos(gamma + beta);
+    float u_hi = cos(max(gamma - beta, 0.0));
+    if (theta_o >= 0.5 * MFL_PI || h_max >= 0.5 * MFL_PI || u_lo <= 0.0)
+        return color(0.0);
+    // D = g(e) / (pi ax ay cos^4): g falls with the stretched slope e <= tan^2 / alpha_min^2,
+    // 1 / cos^4 grows with theta_m >= theta_h - beta (Walter 2007 eqs. 25, 33).
+    float a_min = min(ax, ay);
+    float a_max = max(ax, ay);
+    float tan_h = tan(h_max);
+    float e = tan_h * tan_h / (a_min * a_min);
+    float g = (dist == MFL_DISTRIBUTION_GGX) ? 1.0 / ((1.0 + e) * (1.0 + e)) : exp(-e);
+    float c_min = cos(max(theta_h - beta, 0.0));
+    float d_lo = g / (MFL_PI * ax * ay * c_min * c_min * c_min * c_min);
+    // Lambda grows with theta and with the projected roughness (at most alpha_max).
+    float lam_o = lambda_(dist, vector(sin(theta_o), 0.0, cos(theta_o)), a_max, a_max);
+    float lam_i = lambda_(dist, wi, ax, ay);
+    float g_lo = residual_masking_lo(masking, split, lam_i, lam_o, cos(h_max), cos(theta_o),
+                                     wi[2], u_hi);
+    color F = fresnel_lo(fresnel_type, u_lo, u_hi, ior, n, k);
+    return max(F * (d_lo * g_lo / (4.0 * wi[2])), color(0.0));
 }
 
 // c / tint (split.native_factor): G_lo, the least G2 / G2_hc over wo (1 for height-correlated
@@ -537,6 +609,27 @@ closure color native_ggx(int fresnel_type, vector t, float ax, float ay, float i
     if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
         return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, ior, "ggx");
     return microfacet("ggx", N, t, ax, ay, 0.0, 0);
+}
+
+// Cycles drops a closure whose mean weight is below 1e-5 (CLOSURE_WEIGHT_CUTOFF, kernel/closure/
+// alloc.h). A delta lobe aimed at a small lamp weighs r cos / p with p up to 1 / (the lamp's
+// solid angle) and still carries that lamp's light (radiance up to 1 / solid angle): a residual
+// ray aimed at a 0.5-degree sun from where the lobe is faint weighs about 1e-6 and was dropped,
+// 32% of a rough Beckmann sphere's sun light with it. Below MFL_MIN_DELTA_WEIGHT the lobe is
+// kept with probability mean / MFL_MIN_DELTA_WEIGHT and scaled up to it (Russian roulette:
+// unbiased, and a Mix Shader factor down to 0.1 still clears the cutoff).
+#define MFL_MIN_DELTA_WEIGHT 1e-4
+
+// w, or its roulette, where the closure's weight will be scale * w.
+color delta_weight(color w, color scale, vector key)
+{
+    color final = scale * w;
+    float mean = (final[0] + final[1] + final[2]) / 3.0;
+    if (mean >= MFL_MIN_DELTA_WEIGHT || mean <= 0.0)
+        return w;
+    if (rng(key, -1) * MFL_MIN_DELTA_WEIGHT < mean)
+        return w * (MFL_MIN_DELTA_WEIGHT / mean);
+    return color(0.0);
 }
 
 // One of the two parts per shading sample, never both: when Cycles samples a singular closure

@@ -159,11 +159,12 @@ def reflection_pdf(bsdf, wi, m):
     return np.where(ok, pdf_m / (4.0 * np.where(ok, c, 1.0)), 0.0)
 
 
-def sample_guided_residual(bsdf, records, P, wi, u):
+def sample_guided_residual(bsdf, records, P, wi, u, with_controls: bool = False):
     """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
     r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
     sample_guided_reflection). u: (..., 7) uniforms: 3 for the model's sampler, the choice
-    between lamps and model, the lamp, and 2 for the lamp's direction."""
+    between lamps and model, the lamp, and 2 for the lamp's direction. with_controls: r less
+    what the lamp controls carry (controls.py), as the shaders return it beside them."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     shape = np.broadcast_shapes(P.shape, wi.shape, u.shape[:-1] + (3,))
     P, wi = np.broadcast_to(P, shape), np.broadcast_to(wi, shape)
@@ -181,6 +182,9 @@ def sample_guided_residual(bsdf, records, P, wi, u):
     pdf = p_model + lam * (lamps_pdf(records, P, Ng, wo) if records else 0.0)
     r_cos = (bsdf.eval_specular(wi, wo) - eval_native(bsdf, wi, wo)) * \
         np.maximum(wo[..., 2], 0.0)[..., None]
+    if with_controls and records:
+        from .controls import control_terms, controls_value
+        r_cos = r_cos - controls_value(control_terms(bsdf, records, P, wi, Ng), wo)
     ok = (pdf > 0.0) & (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
     weight = np.where(ok[..., None], np.maximum(r_cos, 0.0) / np.where(ok, pdf, 1.0)[..., None],
                       0.0)

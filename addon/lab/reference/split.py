@@ -127,20 +127,20 @@ def critical_cos(eta):
     return np.sqrt(np.maximum(1.0 - eta * eta, 0.0))
 
 
-def conductor_min(n, k, lo):
-    """Least conductor Fresnel over [lo, 1] (..., 3). With n < 1 and little absorption
+def conductor_min(n, k, lo, hi=1.0):
+    """Least conductor Fresnel over [lo, hi] (..., 3). With n < 1 and little absorption
     (k < CUSP_K) F has a near-plateau left of the critical angle and a cusp and dip right of
     it, as narrow as 1e-6 in wi.h: the two sides are searched separately (k = 0: the plateau is
-    1). Otherwise F is smooth and one search covers [lo, 1]."""
+    1). Otherwise F is smooth and one search covers [lo, hi]."""
     n = np.asarray(n, dtype=float)
     k = np.asarray(k, dtype=float)
     xc = np.broadcast_to(np.where(k < CUSP_K, critical_cos(n), 0.0), np.shape(lo))
-    split_at = np.maximum(lo, xc)
+    split_at = np.minimum(np.maximum(lo, xc), hi)
 
     def F(x):
         return fresnel_conductor(x, n, k)
 
-    right = fresnel_min(F, split_at, 1.0, xc)
+    right = fresnel_min(F, split_at, hi, xc)
     left = np.where((k > 0.0) & (xc > lo), fresnel_min(F, lo, split_at, xc), 1.0)
     return np.minimum(left, right)
 
