@@ -206,10 +206,11 @@ MASKING_DOC = ("How microfacets shadow one another: Height-correlated as in Cycl
 # Same converged image either way: only the noise changes (docs/light-sampling.md).
 ESTIMATOR = Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
                   doc="Native + Residual lets Cycles aim rays at lamps, the sun and bright sky "
-                      "for a GGX reflection (all of it with Height-Correlated masking), and "
-                      "aims the rest (all of a Beckmann one) at the scene's lamps, so "
-                      "highlights from small lamps clear up fast. Stochastic finds lamps only "
-                      "by chance. Both converge to the same image.")
+                      "for a GGX reflection (all of it with Height-Correlated masking); the "
+                      "rest (all of a Beckmann one) is aimed at the scene's lamps, and toward "
+                      "each lamp Cycles aims at most of it too, so highlights from small lamps "
+                      "clear up fast. Stochastic finds lamps only by chance. Both converge to "
+                      "the same image.")
 
 MODELS: dict[str, Model] = {}
 
@@ -338,6 +339,14 @@ LEE_VGROOVE = _add(Model(
               doc="How many bounces inside a groove get their Fresnel colour: 0 chooses from "
                   "the roughness; a low limit renders faster but leaves later bounces "
                   "uncoloured, so deep grooves come out brighter and paler."),
+        # Symmetric grooves: the first bounce toward each lamp is light-sampled by Cycles and
+        # the first two bounces are aimed at the lamps (docs/light-sampling.md, "Lee").
+        Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
+              doc="Native + Residual (Symmetric grooves) lets Cycles aim rays at the scene's "
+                  "lamps for the first bounce inside a groove, and aims the first two bounces "
+                  "at them too, so highlights from small lamps clear up fast; longer paths and "
+                  "Asymmetric grooves find lamps by chance. Stochastic finds all of it by "
+                  "chance. Both converge to the same image."),
     ),
 ))
 

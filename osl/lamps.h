@@ -327,7 +327,8 @@ closure color lamp_controls(int masking, int dist, int fresnel_type, int split, 
         float th = ths[j];
         color w = control_cone(masking, dist, fresnel_type, split, wi, to_local(axes[j], t, b, N),
                                th, ax, ay, ior, n, k, tint);
-        ths[j] = th;
+        if (w[0] + w[1] + w[2] > 0.0)  // a cone left without a control stays the lamp's
+            ths[j] = th;
         weights[j] = w;
         if (w[0] + w[1] + w[2] > 0.0)
             controls += (tint * w) * glossy_toon(normalize(I + axes[j]), th / (0.5 * MFL_PI), 0.0);
@@ -347,6 +348,33 @@ color controls_value(vector wo, int count, vector axes[MFL_CONTROL_SLOTS],
             value += weights[j] / (4.0 * MFL_PI * sin(0.5 * ths[j]) * sin(0.5 * ths[j]));
     }
     return value;
+}
+
+// A direction uniform in one of the chosen cones (each with probability 1 / count: the lamps'
+// cones, widened where a control is; lee_vgroove.osl aims there); cones_pdf is its density.
+vector sample_cones(int count, vector axes[MFL_CONTROL_SLOTS], float ths[MFL_CONTROL_SLOTS],
+                    float u0, float u1, float u2)
+{
+#if MFL_LAMP_COUNT > 0
+    if (count > 0) {
+        int j = min(int(floor(u0 * float(count))), count - 1);
+        return sample_cone(axes[j], 2.0 * sin(0.5 * ths[j]) * sin(0.5 * ths[j]), u1, u2);
+    }
+#endif
+    return vector(0, 0, 1);
+}
+
+float cones_pdf(vector dir, int count, vector axes[MFL_CONTROL_SLOTS],
+                float ths[MFL_CONTROL_SLOTS])
+{
+    float pdf = 0.0;
+    for (int j = 0; j < count; j++) {
+        vector c = cross(dir, axes[j]);
+        float s = sin(ths[j]);
+        if (dot(dir, axes[j]) > 0.0 && dot(c, c) < s * s)
+            pdf += 1.0 / (4.0 * MFL_PI * sin(0.5 * ths[j]) * sin(0.5 * ths[j]));
+    }
+    return (count > 0) ? pdf / float(count) : 0.0;
 }
 
 // lam for a shading point: MFL_GUIDE_FRACTION when some lamp has weight there, else 0; total

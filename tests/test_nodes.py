@@ -38,7 +38,7 @@ LABELS = {
     "walter_glass": ["Tint", "Roughness", "IOR", "Distribution", "Masking", "Sampler",
                      "Light Sampling"],
     "lee_vgroove": ["Specular Tint", "Roughness", "Distribution", "Groove", "Fresnel", "IOR",
-                    "N (complex IOR)", "K (extinction)", "Max Bounces"],
+                    "N (complex IOR)", "K (extinction)", "Max Bounces", "Light Sampling"],
     "heitz2016": ["Tint", "Roughness", "Distribution", "Fresnel", "IOR", "N (complex IOR)",
                   "K (extinction)", "Max Bounces", "Light Sampling"],
 }

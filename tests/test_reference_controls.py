@@ -137,12 +137,12 @@ def test_residual_and_controls_sum_to_the_residual(case):
     records = [SUN, BALL]
     n = 60_000
     terms = controls.control_terms(bsdf, records, P0, WI)
-    assert any(np.any(w > 0) for _, _, w in terms)
+    assert any(np.any(w > 0) for _, _, w, _ in terms)
     wo_c, w_c, _ = _guided(bsdf, records, n, 11, True)
     wo_p, w_p, _ = _guided(bsdf, records, n, 11, False)
     # Before the clamp: the controls stay below the residual at every sampled direction.
     assert np.all(controls.controls_value(terms, wo_p) <= _residual_cos(bsdf, WI, wo_p) + 1e-12)
-    for rec, (_, th_k, w_k) in zip(records, terms):
+    for rec, (_, th_k, w_k, _) in zip(records, terms):
         inside = (lamps.lamp_pdf(rec, P0, wo_c) > 0)[..., None]
         m_c, e_c = _mean_and_error(w_c * inside)
         m_p, e_p = _mean_and_error(w_p * inside)
@@ -182,3 +182,58 @@ def test_osl_constants_are_the_numpy_ones():
                         ("HORIZON_MARGIN", controls.HORIZON_MARGIN),
                         ("GROW_CAP", controls.GROW_CAP), ("GROW_MAX", controls.GROW_MAX)):
         assert float(re.search(rf"#define MFL_CONTROL_{name} (\S+)", src).group(1)) == value
+
+
+# --- Lee's V-grooves (symmetric): controls on the first bounce, the first bounces aimed ---------
+
+def test_the_first_bounce_of_symmetric_grooves_is_the_v_cavity_model():
+    """What the controls bound for Lee (lee.first_order): its k = 1 term, exactly."""
+    from addon.lab.reference import lee
+
+    rng = np.random.default_rng(21)
+    for values in ({"roughness": 0.4}, {"roughness": 0.8, "distribution": "beckmann",
+                                        "fresnel_type": "dielectric"}):
+        bsdf = make_bsdf("lee_vgroove", values)
+        wi, wo = (normalize_rows(rng.normal(size=(4000, 3))) for _ in range(2))
+        wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
+        f1 = lee.eval(wi, wo, bsdf.mf, bsdf._fresnel_table, kmax=1) * bsdf.tint
+        vc = lee.first_order(bsdf).eval(wi, wo)
+        np.testing.assert_allclose(f1, vc, rtol=1e-6, atol=1e-12)
+
+
+def normalize_rows(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def test_lee_native_and_residual_is_the_model():
+    """lee.sample_light_sampled (twin of lee_vgroove.osl): its mean plus the controls is the
+    albedo (against the plain sampler) and, inside each lamp, the model's integral over the
+    lamp (sampling the lamp, full closed-form eval); and it lowers the sun-lit second moment
+    (measured 30 times at roughness 0.6)."""
+    from addon.lab.reference import lee
+
+    bsdf = make_bsdf("lee_vgroove", {"roughness": 0.6})
+    records = [SUN, BALL]
+    n = 60_000
+    u = np.random.default_rng(23).random((n, 10))
+    P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
+    wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
+    assert np.all(w >= 0.0)
+    _, w_plain, _ = bsdf.sample(wi, np.random.default_rng(24).random((n, 3)))
+    m, e = _mean_and_error(w)
+    m_p, e_p = _mean_and_error(w_plain)
+    carried_all = sum(w_k[0] for _, _, w_k, _ in terms)
+    assert np.all(np.abs(m + carried_all - m_p) <= 5 * np.hypot(e, e_p)), (m, carried_all, m_p)
+    for i, (rec, (_, th_k, w_k, _)) in enumerate(zip(records, terms)):
+        inside = (lamps.lamp_pdf(rec, P0, wo) > 0)[..., None]
+        m_c, e_c = _mean_and_error(w * inside)
+        th = controls.lamp_bounding_cone(rec, P0)[1]
+        carried = w_k[0] * (1.0 - math.cos(th)) / (1.0 - math.cos(th_k[0]))
+        rng = np.random.default_rng(30 + i)
+        wl = lamps.sample_lamp(rec, P, rng.random(n), rng.random(n))
+        f = bsdf.eval(wi, wl) * wl[:, 2:3] / lamps.lamp_pdf(rec, P0, wl)[:, None]
+        m_l, e_l = _mean_and_error(f)
+        assert np.all(np.abs(m_c + carried - m_l) <= 5 * np.hypot(e_c, e_l)), (m_c, carried, m_l)
+    wo_s, w_s, _ = bsdf.sample(wi, u[:, :3])
+    lit = lambda d, x: (x * (lamps.lamp_pdf(SUN, P0, d) > 0)[..., None]).sum(-1)  # noqa: E731
+    assert np.mean(lit(wo_s, w_s) ** 2) > 10 * np.mean(lit(wo, w) ** 2)

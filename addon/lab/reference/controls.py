@@ -177,17 +177,18 @@ def lamp_bounding_cone(rec, P):
 
 
 def select_cones(records, P, Ng):
-    """Up to CONTROL_SLOTS cones [(axis, th, valid)] in table order (brightest first): lamps with
+    """One cone per record [(axis, th, valid)], valid for at most CONTROL_SLOTS of them per
+    point, in table order (brightest first): lamps with
     weight at P whose cone, widened as far as control_cone may (GROW_MAX), clears the horizon of
     Ng (here also the shading normal) and every cone chosen before it (two overlapping controls
     could sum above the residual)."""
     from .lamps import lamp_weight
     P = np.asarray(P, dtype=float)
     chosen = []
+    running = np.zeros(P.shape[:-1], dtype=int)
     for rec in records:
-        if len(chosen) == CONTROL_SLOTS:
-            break
         axis, th, valid = lamp_bounding_cone(rec, P)
+        valid = valid & (running < CONTROL_SLOTS)
         reach = np.maximum(th, GROW_MAX)
         valid = valid & (lamp_weight(rec, P, Ng) > 0.0) & (th < 0.5 * math.pi)
         valid &= dot(axis, Ng) > np.sin(reach) + HORIZON_MARGIN
@@ -195,25 +196,29 @@ def select_cones(records, P, Ng):
             apart = np.arccos(np.clip(dot(axis, a2), -1.0, 1.0)) > reach + np.maximum(th2, GROW_MAX)
             valid &= apart | ~v2
         chosen.append((axis, th, valid))
+        running = running + valid
     return chosen
 
 
 def control_terms(bsdf, records, P, wi, Ng=(0.0, 0.0, 1.0)):
-    """[(axis, th, w_K)] of the controls the shader returns at P for wi (w_K tint included, 0
-    where left out): select_cones, then control_weight (osl lamp_controls)."""
+    """[(axis, th, w_K, valid)] of the chosen cones at P for wi (osl lamp_controls): w_K tint
+    included, 0 where left out; th the control's cone, the lamp's where it has no control;
+    valid where select_cones chose the cone."""
     P, wi = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(wi, dtype=float))
     Ng = np.broadcast_to(np.asarray(Ng, dtype=float), P.shape)
     terms = []
     for axis, th, valid in select_cones(records, P, Ng):
         th_v = np.where(valid, th, MIN_HALF_ANGLE)
         th_k, w = control_cone(bsdf, wi, np.where(valid[..., None], axis, Ng), th_v)
-        terms.append((axis, th_k, np.where(valid[..., None], w, 0.0)))
+        w = np.where(valid[..., None], w, 0.0)
+        th_k = np.where(np.sum(w, axis=-1) > 0.0, th_k, th_v)
+        terms.append((axis, th_k, w, valid))
     return terms
 
 
 def controls_value(terms, wo):
     """sum_K w_K t_K(wo) (..., 3): what the controls carry toward wo (osl controls_value)."""
     value = 0.0
-    for axis, th, w in terms:
+    for axis, th, w, _ in terms:
         value = value + w * toon_value(axis, th, wo)[..., None]
     return value

@@ -1044,6 +1044,7 @@ class LeeBRDF:
         self.mf = mf
         self.groove = groove
         self.fresnel_kind = fresnel
+        self.ior, self.n, self.k = float(ior), np.asarray(n, dtype=float), np.asarray(k, dtype=float)
         self.fresnel = fresnel_fn(fresnel, ior, n, k)
         self.tint = np.asarray(tint, dtype=float)
         self.diffuse_albedo = np.zeros(3)
@@ -1100,3 +1101,70 @@ class LeeBRDF:
             return R, R * mu[:, None], -R * np.sqrt(1.0 - mu * mu)[:, None]
         E, Vn, Vt = moments(mu, self.mf, self.fresnel, self.groove, self.kmax, **self.quad)
         return E * self.tint, Vn * self.tint, Vt * self.tint
+
+
+# -- Native + Residual (symmetric grooves; osl/lee_vgroove.osl, docs/light-sampling.md "Lee") ---
+# The bounce terms aimed into the lamp controls' cones (osl LEE_AIMED_ORDERS).
+AIMED_ORDERS = 6
+
+
+def first_order(bsdf: LeeBRDF):
+    """The k = 1 term of the symmetric grooves as a BRDF: exactly the V-cavity Cook-Torrance
+    model with the grooves' D and Fresnel (docs/models.md sec. 4); the lamp controls bound it."""
+    from .bsdf import MicrofacetBRDF
+
+    return MicrofacetBRDF(bsdf.mf, "vcavity", "vndf", bsdf.fresnel_kind, bsdf.ior, bsdf.n,
+                          bsdf.k, bsdf.tint)
+
+
+def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
+    """One sample of the Native + Residual estimator (the twin of lee_vgroove.osl): (wo, weight
+    RGB of the delta lobe, tint included, terms: the controls as controls.control_terms gives
+    them, which ride on every sample). With A the chosen cones (each lamp's, widened where it
+    has a control) and lam = GUIDE_FRACTION where there are any: with probability lam a
+    direction uniform in one of them (each with probability 1 / count), weighted by
+    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p); otherwise a path of the sampler, its exit
+    dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (..., 10)
+    uniforms: 0-2 the sampler, 6 the branch, 7-9 the cone."""
+    from . import controls
+    from .lamps import GUIDE_FRACTION, _frame
+
+    P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
+    n = wi.shape[0]
+    terms = controls.control_terms(first_order(bsdf), records, P, wi)
+    valid = np.stack([v for *_, v in terms], -1) if terms else np.zeros((n, 0), bool)
+    count = valid.sum(-1)
+    # The OSL keeps the valid cones first, in table order: the j-th valid one is slot j.
+    lam = np.where(count > 0, GUIDE_FRACTION, 0.0)
+    wo_s, w_s, k_s = bsdf.sample(wi, u[..., :3])
+    wo = wo_s.copy()
+    aimed = u[:, 6] < lam
+    slot = np.minimum(np.floor(u[:, 7] * count), np.maximum(count - 1, 0)).astype(int)
+    rank = np.cumsum(valid, -1) - 1
+    for j, (axis, th, _, _) in enumerate(terms):
+        sel = aimed & valid[:, j] & (rank[:, j] == slot)
+        if np.any(sel):
+            a = np.broadcast_to(axis, (n, 3))[sel]
+            omc = 2.0 * np.sin(0.5 * np.broadcast_to(th, (n,))[sel]) ** 2
+            s = u[sel, 8] * omc
+            sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
+            phi = 2.0 * np.pi * u[sel, 9]
+            t, b = _frame(a)
+            wo[sel] = ((sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b
+                       + (1.0 - s)[:, None] * a)
+    p_aim = np.zeros(n)
+    inside = np.zeros(n, bool)
+    for j, (axis, th, _, _) in enumerate(terms):
+        t_j = np.where(valid[:, j], controls.toon_value(axis, th, wo), 0.0)
+        p_aim += t_j
+        inside |= t_j > 0.0
+    p_aim = np.where(count > 0, p_aim / np.maximum(count, 1), 0.0)
+    low = eval(wi, wo, bsdf.mf, bsdf._fresnel_table, AIMED_ORDERS, bsdf.kmax) * bsdf.tint
+    r = low * np.maximum(wo[:, 2], 0.0)[:, None] - controls.controls_value(terms, wo)
+    ok = p_aim > 0.0
+    w_aim = np.where(ok[:, None], np.maximum(r, 0.0) / np.where(ok, lam * p_aim, 1.0)[:, None],
+                     0.0)
+    drop = (k_s <= AIMED_ORDERS) & inside
+    w_path = np.where((count > 0)[:, None],
+                      np.where(drop[:, None], 0.0, w_s / (1.0 - lam)[:, None]), w_s)
+    return wo, np.where(aimed[:, None], w_aim, w_path), terms
