@@ -197,14 +197,13 @@ AIMED_ROW = [
 ]
 
 
-def _render_row(specs, add_light, seed):
+def _render_row(specs, add_light, seed, samples=AIMED_SAMPLES, cell_px=LAYOUT.cell_px):
     """One row of `specs` over the black world, lit by `add_light(scene)`: (layout, image)."""
     scene = harness.new_scene()
     mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
             for i, s in enumerate(specs)]
-    layout = grid.GridLayout(rows=1, cols=len(specs), cell_px=LAYOUT.cell_px,
-                             spacing=LAYOUT.spacing)
-    harness.build_grid_scene(layout, mats, BLACK, AIMED_SAMPLES, seed=seed)
+    layout = grid.GridLayout(rows=1, cols=len(specs), cell_px=cell_px, spacing=LAYOUT.spacing)
+    harness.build_grid_scene(layout, mats, BLACK, samples, seed=seed)
     add_light(scene)
     image, _ = harness.render(scene)
     return layout, image
@@ -215,14 +214,20 @@ def _with_quadrature_error(layout, image, term, nodes):
     return layout, image, fine, float(np.abs(fine - coarse).max())
 
 
-@pytest.fixture(scope="module")
-def small_sun_render():
-    layout, image = _render_row(AIMED_ROW, lambda scene: add_sun(
-        scene, strength=SUN_STRENGTH, angle_deg=SMALL_SUN_DEG), seed=5)
-    half = math.radians(SMALL_SUN_DEG) / 2
+def _sun_row(specs, angle_deg, seed, nodes, **row):
+    """One row under a sun of `angle_deg` over the black world, with its numpy sun term:
+    (layout, image, reference, quadrature error)."""
+    layout, image = _render_row(specs, lambda scene: add_sun(
+        scene, strength=SUN_STRENGTH, angle_deg=angle_deg), seed, **row)
+    half = math.radians(angle_deg) / 2
     radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
     return _with_quadrature_error(layout, image, lambda n: sun_term(
-        layout, AIMED_ROW, radiance, half, n), (24, 48))
+        layout, specs, radiance, half, n), nodes)
+
+
+@pytest.fixture(scope="module")
+def small_sun_render():
+    return _sun_row(AIMED_ROW, SMALL_SUN_DEG, 5, (24, 48))
 
 
 def test_aimed_residual_matches_the_small_sun_reference(small_sun_render):
@@ -248,18 +253,8 @@ TINY_SUN_ROW = [
 ]
 
 
-@pytest.fixture(scope="module")
-def tiny_sun_render():
-    layout, image = _render_row(TINY_SUN_ROW, lambda scene: add_sun(
-        scene, strength=SUN_STRENGTH, angle_deg=TINY_SUN_DEG), seed=11)
-    half = math.radians(TINY_SUN_DEG) / 2
-    radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
-    return _with_quadrature_error(layout, image, lambda n: sun_term(
-        layout, TINY_SUN_ROW, radiance, half, n), (16, 32))
-
-
-def test_aimed_residual_and_controls_match_a_half_degree_sun(tiny_sun_render):
-    layout, image, reference, quad_err = tiny_sun_render
+def test_aimed_residual_and_controls_match_a_half_degree_sun():
+    layout, image, reference, quad_err = _sun_row(TINY_SUN_ROW, TINY_SUN_DEG, 11, (16, 32))
     _assert_bands_match(layout, TINY_SUN_ROW, image, reference, quad_err, power=0.1)
 
 
@@ -373,22 +368,8 @@ LEE_SMALL_ROW = [SphereSpec("lee_vgroove", {"roughness": r}, f"Lee symmetric r{r
 LEE_SMALL_SAMPLES = 1024
 
 
-@pytest.fixture(scope="module")
-def lee_small_sun_render():
-    scene = harness.new_scene()
-    mats = [harness.model_material(s.model_id, s.values, f"{i:03d} {s.label}")
-            for i, s in enumerate(LEE_SMALL_ROW)]
-    layout = grid.GridLayout(rows=1, cols=len(LEE_SMALL_ROW), cell_px=LEE_LAYOUT.cell_px,
-                             spacing=LAYOUT.spacing)
-    harness.build_grid_scene(layout, mats, BLACK, LEE_SMALL_SAMPLES, seed=13)
-    add_sun(scene, strength=SUN_STRENGTH, angle_deg=SMALL_SUN_DEG)
-    image, _ = harness.render(scene)
-    half = math.radians(SMALL_SUN_DEG) / 2
-    radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
-    return _with_quadrature_error(layout, image, lambda n: sun_term(
-        layout, LEE_SMALL_ROW, radiance, half, n), (8, 16))
-
-
-def test_lee_native_and_residual_matches_the_small_sun_reference(lee_small_sun_render):
-    layout, image, reference, quad_err = lee_small_sun_render
+def test_lee_native_and_residual_matches_the_small_sun_reference():
+    layout, image, reference, quad_err = _sun_row(
+        LEE_SMALL_ROW, SMALL_SUN_DEG, 13, (8, 16), samples=LEE_SMALL_SAMPLES,
+        cell_px=LEE_LAYOUT.cell_px)
     _assert_bands_match(layout, LEE_SMALL_ROW, image, reference, quad_err, power=0.1)
