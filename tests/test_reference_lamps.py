@@ -55,14 +55,16 @@ def _solid_angle_by_uniform_directions(rec, n=2_000_000, seed=0):
 
 def _analytic_solid_angle(rec):
     """Cones: the sun's 2 pi (1 - cos h); a sphere's 2 pi (1 - sqrt(1 - r^2/d^2)); a disk of
-    radius r facing P0 2 pi (1 - d / sqrt(d^2 + r^2)). Areas: None."""
+    radius r facing P0 2 pi (1 - d / sqrt(d^2 + r^2)), each with sin^2 h enlarged by
+    lamps.MARGIN (the proposal's cone). Areas: None."""
     if rec.kind == "sun":
-        return 2 * np.pi * rec.size
-    if rec.kind == "sphere":
+        sin2 = rec.size * (2 - rec.size)
+    elif rec.kind == "sphere":
         d, r = np.linalg.norm(np.array(rec.position) - P0), rec.size
-        cos_h = math.sqrt(1 - r * r / (d * d)) if rec.is_sphere else d / math.hypot(d, r)
-        return 2 * np.pi * (1 - cos_h)
-    return None
+        sin2 = r * r / (d * d) if rec.is_sphere else r * r / (d * d + r * r)
+    else:
+        return None
+    return 2 * np.pi * (1 - math.sqrt(1 - sin2 * (1 + lamps.MARGIN)))
 
 
 @pytest.mark.parametrize("rec", LAMPS, ids=lambda r: r.kind + ("_ball" if r.is_sphere else ""))
@@ -229,6 +231,7 @@ def test_osl_constants_are_the_numpy_ones():
     src = (ROOT / "osl" / "lamps.h").read_text()
     assert float(re.search(r"#define MFL_GUIDE_FRACTION (\S+)", src).group(1)) == \
         lamps.GUIDE_FRACTION
+    assert float(re.search(r"#define MFL_LAMP_MARGIN (\S+)", src).group(1)) == lamps.MARGIN
     for i, kind in enumerate(records_mod.KINDS):
         assert re.search(rf"#define MFL_LAMP_{kind.upper()} {i}\b", src), kind
 

@@ -158,7 +158,7 @@ def lamp_bounding_cone(rec, P):
     """(axis, half-angle, valid): a cone holding every direction toward the lamp from P (sun and
     sphere lamps: lamps._cone; rectangles and ellipses: about the centre, out to the farthest
     corner of the rectangle; osl lamp_bounding_cone)."""
-    from .lamps import _cone
+    from .lamps import _cone, _extents
     P = np.asarray(P, dtype=float)
     if rec.kind in ("sun", "sphere"):
         axis, omc, sin2, valid = _cone(rec, P)
@@ -166,7 +166,7 @@ def lamp_bounding_cone(rec, P):
                       np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
         return axis, th, valid
     c = np.asarray(rec.position, dtype=float)
-    u, v = np.asarray(rec.u, dtype=float), np.asarray(rec.v, dtype=float)
+    u, v = _extents(rec)
     axis = normalize(c - P)
     th = np.zeros(P.shape[:-1])
     for su in (-1.0, 1.0):

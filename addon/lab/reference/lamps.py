@@ -17,8 +17,12 @@ from ...lamps import LampRecord
 from .microfacet import dot, normalize, reflect
 from .split import eval_native
 
-# osl/lamps.h MFL_GUIDE_FRACTION (tests/test_reference_lamps.py checks they agree).
+# osl/lamps.h MFL_GUIDE_FRACTION, MFL_LAMP_MARGIN (tests/test_reference_lamps.py checks they
+# agree). Sampling and density use each lamp enlarged by MARGIN (a cone's sin^2, an area's
+# half-extents), so that float rounding on the lamp's rim never leaves a direction Cycles sees
+# inside the lamp outside the density (a rare, heavy sample); only the proposal changes.
 GUIDE_FRACTION = 0.5
+MARGIN = 2e-3
 
 
 def _cone(rec: LampRecord, P):
@@ -26,20 +30,31 @@ def _cone(rec: LampRecord, P):
     P = np.asarray(P, dtype=float)
     if rec.kind == "sun":
         axis = np.broadcast_to(np.asarray(rec.axis, dtype=float), P.shape)
-        omc = np.full(P.shape[:-1], rec.size)
-        return axis, omc, omc * (2.0 - omc), np.ones(P.shape[:-1], bool)
-    to = np.asarray(rec.position, dtype=float) - P
-    d2 = np.sum(to * to, axis=-1)
-    valid = d2 > rec.size ** 2
-    d2s = np.where(valid, d2, 1.0)
-    # A sphere subtends asin(r / d); a disk facing P (Soft Falloff) atan(r / d).
-    sin2 = np.where(valid, rec.size ** 2 / (d2s if rec.is_sphere else d2s + rec.size ** 2), 1.0)
+        sin2 = np.full(P.shape[:-1], rec.size * (2.0 - rec.size))
+        valid = np.ones(P.shape[:-1], bool)
+    else:
+        to = np.asarray(rec.position, dtype=float) - P
+        d2 = np.sum(to * to, axis=-1)
+        valid = d2 > rec.size ** 2
+        d2s = np.where(valid, d2, 1.0)
+        axis = to / np.sqrt(d2s)[..., None]
+        # A sphere subtends asin(r / d); a disk facing P (Soft Falloff) atan(r / d).
+        sin2 = np.where(valid, rec.size ** 2 / (d2s if rec.is_sphere else d2s + rec.size ** 2),
+                        1.0)
+    sin2 = np.minimum(sin2 * (1.0 + MARGIN), 1.0)
     omc = sin2 / (1.0 + np.sqrt(np.maximum(1.0 - sin2, 0.0)))
-    return to / np.sqrt(d2s)[..., None], omc, sin2, valid
+    return axis, omc, sin2, valid
+
+
+def _extents(rec: LampRecord):
+    """An area lamp's half-extent axes, enlarged by MARGIN."""
+    return (np.asarray(rec.u, dtype=float) * (1.0 + MARGIN),
+            np.asarray(rec.v, dtype=float) * (1.0 + MARGIN))
 
 
 def _area(rec: LampRecord) -> float:
-    a = np.linalg.norm(rec.u) * np.linalg.norm(rec.v)
+    u, v = _extents(rec)
+    a = np.linalg.norm(u) * np.linalg.norm(v)
     return float(np.pi * a if rec.kind == "ellipse" else 4.0 * a)
 
 
@@ -86,8 +101,8 @@ def sample_lamp(rec: LampRecord, P, u1, u2):
         s, t = r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)
     else:
         s, t = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
-    q = (np.asarray(rec.position) + s[..., None] * np.asarray(rec.u)
-         + t[..., None] * np.asarray(rec.v))
+    u, v = _extents(rec)
+    q = np.asarray(rec.position) + s[..., None] * u + t[..., None] * v
     return normalize(q - P)
 
 
@@ -100,7 +115,7 @@ def lamp_pdf(rec: LampRecord, P, dirs):
         inside = valid & (dot(dirs, axis) > 0.0) & (np.sum(c * c, axis=-1) <= sin2)
         return np.where(inside, 1.0 / (2.0 * np.pi * np.where(inside, omc, 1.0)), 0.0)
     n = np.asarray(rec.axis, dtype=float)
-    u, v, c = (np.asarray(x, dtype=float) for x in (rec.u, rec.v, rec.position))
+    (u, v), c = _extents(rec), np.asarray(rec.position, dtype=float)
     cos_l = -dot(dirs, n)
     ok = cos_l > 0.0
     dist = np.where(ok, dot(P - c, n) / np.where(ok, cos_l, 1.0), -1.0)
