@@ -240,7 +240,8 @@ int lamp_bounding_cone(int i, point P, output vector axis, output float th)
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0;
-        th = (kind == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc)) : asin(sqrt(clamp(sin2, 0.0, 1.0)));
+        th = (kind == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
+                                    : asin(sqrt(clamp(sin2, 0.0, 1.0)));
         return 1;
     }
     vector to = lamp_vector(i, 1) - P;
@@ -279,7 +280,8 @@ int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_S
             continue;
         int apart = 1;
         for (int j = 0; j < count; j++)
-            if (acos(clamp(dot(a, axes[j]), -1.0, 1.0)) <= reach + max(ths[j], MFL_CONTROL_GROW_MAX))
+            if (acos(clamp(dot(a, axes[j]), -1.0, 1.0)) <=
+                reach + max(ths[j], MFL_CONTROL_GROW_MAX))
                 apart = 0;
         if (!apart)
             continue;
@@ -428,8 +430,9 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 // residual's F G2 - c G2_hc in its sample weight, D(m) / (4 wi.n p(wo)) (with the model's
 // sampler alone this is sample_reflection_factor's closed form), and the half vector m of wi
 // and wo; pdf receives p(wo) where some lamp has weight (else 0). model_share receives
-// (1 - lam) p_model(wo) / p(wo), 1 without lamps: the weight over it is what the model's sampler alone would give wo, which split_closures chooses with (a
-// choice made from the guided weight itself would undo the aiming: see split_closures).
+// (1 - lam) p_model(wo) / p(wo), 1 without lamps: the weight over it is what the model's
+// sampler alone would give wo, which split_closures chooses with (a choice made from the
+// guided weight itself would undo the aiming: see split_closures).
 // 0 for an invalid sample.
 float sample_guided_reflection(int sampler, int dist, vector wi, float ax, float ay, vector t,
                                vector b, normal n, vector key, output vector m,
