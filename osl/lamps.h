@@ -25,6 +25,17 @@
 // the proposal, so the estimate stays exact.
 #define MFL_LAMP_MARGIN 2e-3
 
+// Whether dir lies in the cone of sin^2(half-angle) sin2 around axis (half-angles below pi/2):
+// sin^2 from the cross product, exact for tiny cones where 1 - cos rounds away.
+int in_cone(vector dir, vector axis, float sin2)
+{
+    vector c = cross(dir, axis);
+    return dot(dir, axis) > 0.0 && dot(c, c) <= sin2;
+}
+
+// The uniform density over a cone of half-angle th: 1 / (2 pi (1 - cos th)).
+float cone_density(float th) { return 1.0 / (4.0 * MFL_PI * sin(0.5 * th) * sin(0.5 * th)); }
+
 #if MFL_LAMP_COUNT > 0
 vector lamp_vector(int i, int j)
 {
@@ -140,10 +151,7 @@ float lamp_pdf(int i, point P, vector dir)
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0.0;
-        vector c = cross(dir, axis);  // sin^2 from the cross product: exact for tiny cones
-        if (dot(dir, axis) <= 0.0 || dot(c, c) > sin2)
-            return 0.0;
-        return 1.0 / (2.0 * MFL_PI * omc);
+        return in_cone(dir, axis, sin2) ? 1.0 / (2.0 * MFL_PI * omc) : 0.0;
     }
     vector n = lamp_vector(i, 4);
     float cos_l = -dot(dir, n);
@@ -357,10 +365,8 @@ color controls_value(vector wo, int count, vector axes[MFL_CONTROL_SLOTS],
 {
     color value = color(0.0);
     for (int j = 0; j < count; j++) {
-        vector c = cross(wo, axes[j]);
-        float s = sin(ths[j]);
-        if (dot(wo, axes[j]) > 0.0 && dot(c, c) < s * s)
-            value += weights[j] / (4.0 * MFL_PI * sin(0.5 * ths[j]) * sin(0.5 * ths[j]));
+        if (in_cone(wo, axes[j], sin(ths[j]) * sin(ths[j])))
+            value += weights[j] * cone_density(ths[j]);
     }
     return value;
 }
@@ -384,10 +390,8 @@ float cones_pdf(vector dir, int count, vector axes[MFL_CONTROL_SLOTS],
 {
     float pdf = 0.0;
     for (int j = 0; j < count; j++) {
-        vector c = cross(dir, axes[j]);
-        float s = sin(ths[j]);
-        if (dot(dir, axes[j]) > 0.0 && dot(c, c) < s * s)
-            pdf += 1.0 / (4.0 * MFL_PI * sin(0.5 * ths[j]) * sin(0.5 * ths[j]));
+        if (in_cone(dir, axes[j], sin(ths[j]) * sin(ths[j])))
+            pdf += cone_density(ths[j]);
     }
     return (count > 0) ? pdf / float(count) : 0.0;
 }
