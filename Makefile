@@ -22,7 +22,8 @@ COMPAT ?= 4.2 4.5 5.0
 # release).
 COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py \
 	tests/test_harness.py tests/test_nodes.py tests/test_presets.py tests/test_specialize.py \
-	tests/test_portability.py tests/test_handover.py tests/test_render_lights.py \
+	tests/test_portability.py tests/test_handover.py tests/test_world_handover.py \
+	tests/test_render_lights.py \
 	--deselect tests/test_render_lights.py::test_lee_matches_the_sun_reference \
 	--deselect tests/test_render_lights.py::test_lee_native_and_residual_matches_the_small_sun_reference \
 	--deselect tests/test_render_lights.py::test_aimed_residual_matches_the_point_lamp_reference \

@@ -52,6 +52,10 @@ def node_tree_of(idblock):
     return idblock.node_tree if getattr(idblock, "use_nodes", True) else None
 
 
+# Sky Texture types that draw a sun disc (5.0 split Nishita into single and multiple scattering).
+SKY_TYPES_WITH_SUN_DISC = frozenset({"NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING"})
+
+
 def set_modifier_input(modifier, identifier: str, value) -> None:
     """Set a Geometry Nodes modifier's group input (5.3 moved them from ID properties on the
     modifier to `modifier.properties.inputs.<identifier>.value`)."""

@@ -2,9 +2,10 @@
 residual's direct light").
 
 `hand_over(scene)` reads the lamps the scene renders (sun, point, spot, area, at the current
-frame), writes their table into every Microfacet Lab text whose shader aims at lamps, and
-recompiles the Script nodes that use a text that changed. A render_pre handler runs it before
-every render: F12, `blender --background`, each frame of an animation (so animated lamps are
+frame) and the world's bright spots (an HDRI's sun, the Sky Texture's sun disc:
+addon/world_lights.py), writes their table into every Microfacet Lab text whose shader aims
+at lamps, and recompiles the Script nodes that use a text that changed. A render_pre handler
+runs it before every render: F12, `blender --background`, each frame of an animation (so animated lamps are
 handed over per frame); the harness and scripts/render_scene.py call it too.
 
 The table only guides where the shaders' residual rays go (addon/lamps.py), so a .blend that
@@ -18,7 +19,7 @@ import bpy
 from bpy.app.handlers import persistent
 from mathutils import Vector
 
-from . import lamps, shaders
+from . import lamps, shaders, world_lights
 from .catalog import MODELS
 
 
@@ -78,6 +79,14 @@ def scene_lamps(scene, depsgraph=None) -> list:
     return records[:lamps.MAX_LAMPS]
 
 
+def scene_records(scene, depsgraph=None) -> list:
+    """What the shaders aim at: the scene's lamps and its world's bright spots, brightest
+    first, at most lamps.MAX_LAMPS."""
+    records = scene_lamps(scene, depsgraph) + world_lights.world_records(scene)
+    records.sort(key=lambda r: -r.power)
+    return records[:lamps.MAX_LAMPS]
+
+
 def lamp_models() -> list:
     """The catalog models whose shaders aim at lamps (their OSL includes lamps.h)."""
     return [m for m in MODELS.values() if shaders.uses_lamps(m)]
@@ -93,9 +102,9 @@ def _script_nodes(text):
 
 
 def hand_over(scene, depsgraph=None) -> list[str]:
-    """Write `scene`'s lamps into the lamp-aiming texts that exist and recompile their Script
-    nodes; returns the names of the texts that changed (none when the lamps did not)."""
-    records = scene_lamps(scene, depsgraph)
+    """Write `scene`'s lamps and world spots into the lamp-aiming texts that exist and recompile
+    their Script nodes; returns the names of the texts that changed (none when nothing did)."""
+    records = scene_records(scene, depsgraph)
     changed = []
     for model in lamp_models():
         text = bpy.data.texts.get(shaders.text_name(model))

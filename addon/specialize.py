@@ -328,7 +328,7 @@ def prune_and_compile(scene, report: Report) -> None:
         for _, node in _lab_nodes(mat) if mat is not None else []:
             scene_groups.add(node.node_tree.name_full)
     compiled, up_to_date = set(), set()
-    records = handover.scene_lamps(scene)
+    records = handover.scene_records(scene)
     for name in sorted(scene_groups):
         group = bpy.data.node_groups[name]
         model = group_model(group)

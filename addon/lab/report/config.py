@@ -16,8 +16,12 @@ SUN_WORLD = 0.05  # the dim uniform world under the sun
 # Lights that are a uniform cone over the dim world, by environment key: (kind, angular
 # diameter in degrees). "lamp": a Cycles sun lamp (radiance calibrated on a mirror sphere);
 # "world": a bright spot painted into the world shader, no lamp (radiance exact, SPOT_STRENGTH
-# of irradiance at normal incidence), found by Cycles' world importance sampling.
-CONE_LIGHTS = {"sun": ("lamp", SUN_ANGLE_DEG), "sun05": ("lamp", 0.5), "spot": ("world", 4.0)}
+# of irradiance at normal incidence), found by Cycles' world importance sampling and not read
+# by the add-on; "image": the same spot drawn in the pixels of an equirectangular image (an
+# HDRI's sun, Closest interpolation, HDRI_SIZE pixels), found and handed over by the add-on.
+CONE_LIGHTS = {"sun": ("lamp", SUN_ANGLE_DEG), "sun05": ("lamp", 0.5), "spot": ("world", 4.0),
+               "hdri": ("image", 4.0)}
+HDRI_SIZE = (512, 256)
 SPOT_STRENGTH = 1.0
 # "point": a point lamp (Blender's defaults: Soft Falloff, so a disk facing the shading point)
 # above the grid's centre, over the dim world; power for an irradiance of 1 W/m^2 at the
@@ -85,14 +89,14 @@ def config(mode: str) -> Config:
     theta_full = tuple(np.round(np.concatenate([np.linspace(0, 80, 9), [84, 87, 88.5, 89.5, 89.9]]), 3))
     if mode == "full":
         return Config("full", tuple(2 ** k for k in range(11)), 20, CONVERGENCE_ROUGHNESS,
-                      ("white", "gradient", "sun", "sun05", "spot", "point", "area"), 1, 1024,
+                      ("white", "gradient", "sun", "sun05", "spot", "hdri", "point", "area"), 1, 1024,
                       "full",
                       40000,
                       theta_full,
                       (0.1, 0.3, 0.6, 1.0), 96, (2, 3, 4, 6, 8), 14, 32, (24, 48))
     if mode == "quick":
         return Config("quick", (1, 4, 16, 64, 256), 16, CONVERGENCE_ROUGHNESS,
-                      ("white", "gradient", "sun", "sun05", "spot", "point", "area"), 8, 256,
+                      ("white", "gradient", "sun", "sun05", "spot", "hdri", "point", "area"), 8, 256,
                       "quick",
                       8000,
                       (0.0, 30.0, 60.0, 80.0, 87.0, 89.0, 89.9), (0.1, 0.3, 1.0), 64,

@@ -10,8 +10,8 @@ import time
 import numpy as np
 
 from . import optix
-from .config import (AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP, SPOT_STRENGTH,
-                     SUN_ANGLE_DEG, SUN_DIRECTION, SUN_STRENGTH, SUN_WORLD, TARGET)
+from .config import (AREA_LAMP, CONE_LIGHTS, HDRI_SIZE, LAMP_ENVS, MU_MIN_RMSE, POINT_LAMP,
+                     SPOT_STRENGTH, SUN_ANGLE_DEG, SUN_DIRECTION, SUN_STRENGTH, SUN_WORLD, TARGET)
 from .plotting import SAMPLER_STYLE, _plt, to_display
 from .references import reference_image, relative_rmse
 from .rows import RATIO_TO, eval_is_fast, specs_for, twin
@@ -140,7 +140,8 @@ def time_table(conv, rows) -> list:
 
 # -- plots -----------------------------------------------------------------------------------
 ENV_TITLES = {"white": "white furnace", "gradient": "smooth gradient",
-              **{k: (f"sun lamp {a:g} deg" if kind == "lamp" else f"world spot {a:g} deg, no lamp")
+              **{k: {"lamp": f"sun lamp {a:g} deg", "world": f"world spot {a:g} deg, no lamp",
+                     "image": f"HDRI spot {a:g} deg (image), no lamp"}[kind]
                  + " over dim world" for k, (kind, a) in CONE_LIGHTS.items()},
               "point": f"point lamp r {POINT_LAMP['radius']:g} at {POINT_LAMP['height'] - 1:g} "
                        "over dim world",
@@ -253,7 +254,12 @@ def _sun_lines(cfg, conv, sun_cal) -> list:
                                       if kind == "lamp" else
                                       f"no lamp, a {a:g}-degree spot painted into the world "
                                       f"(irradiance {SPOT_STRENGTH:g} at normal incidence), lit "
-                                      "by Cycles' world importance sampling")
+                                      "by Cycles' world importance sampling, not read by the "
+                                      "add-on" if kind == "world" else
+                                      f"the same spot drawn in the pixels of a "
+                                      f"{HDRI_SIZE[0]} x {HDRI_SIZE[1]} equirectangular image "
+                                      "(Closest), which the add-on finds and hands over; its "
+                                      "reference integrates the pixel cells")
                         for k, (kind, a) in CONE_LIGHTS.items() if k != "sun" and k in cfg.envs)
             + ". Under the 0.5-degree sun the quick report's 256 samples are a low-sample "
             "count for any estimator that finds the sun by chance: its RMSE there is "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import grid
-from .config import AREA_LAMP, LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
+from .config import AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
 
 
 def _table_key(spec):
@@ -163,6 +163,37 @@ def area_lamp_term(layout, specs, centre, u, v, radiance: float, nodes: tuple) -
     return _light_term(layout, specs, nodes_of)
 
 
+def equirect_cell_nodes(radiance, n: int):
+    """Directions and solid-angle weights times radiance over the lit pixels of an
+    equirectangular world image (H, W) seen with Closest interpolation (each pixel a cell of
+    constant radiance, addon/world_spots.py conventions): Gauss-Legendre in cos(theta) and in
+    the azimuth, n x n per cell, exact measure dphi dcos(theta). Returns (K, 3), (K,)."""
+    from ...world_spots import equirect_direction
+
+    radiance = np.asarray(radiance, dtype=float)
+    height, width = radiance.shape
+    rows, cols = np.nonzero(radiance > 0.0)
+    x, w = np.polynomial.legendre.leggauss(n)
+    a, b = np.meshgrid((x + 1.0) / 2.0, (x + 1.0) / 2.0, indexing="ij")
+    wab = np.outer(w, w).reshape(-1) / 4.0
+    u = (cols[:, None] + a.reshape(-1)) / width  # (cells, n n)
+    z_lo = np.cos(np.pi * (1.0 - rows / height))
+    z_hi = np.cos(np.pi * (1.0 - (rows + 1) / height))
+    z = z_lo[:, None] + (z_hi - z_lo)[:, None] * b.reshape(-1)
+    v = 1.0 - np.arccos(np.clip(z, -1.0, 1.0)) / np.pi
+    dirs = equirect_direction(u, v).reshape(-1, 3)
+    dz_dphi = ((z_hi - z_lo) * (2.0 * np.pi / width))[:, None] * wab
+    weights = (radiance[rows, cols][:, None] * dz_dphi).reshape(-1)
+    return dirs, weights
+
+
+def image_world_term(layout, specs, radiance, n: int) -> np.ndarray:
+    """The integral of f |wo.n| L over an equirectangular world image of `radiance` (H, W),
+    black elsewhere, per pixel (H, W, 3): what a grid renders under that world alone."""
+    dirs, weights = equirect_cell_nodes(radiance, n)
+    return _light_term(layout, specs, lambda sel, points, normals: (dirs, weights))
+
+
 def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, nodes=(24, 48)):
     """The reference of a grid under 'white', 'gradient', a cone light of CONE_LIGHTS (then
     `sun` = (radiance, half_angle)) or the point lamp; returns (image, the lamp quadrature's
@@ -180,6 +211,13 @@ def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, n
         def term(n):
             return point_lamp_term(layout, specs, (0.0, 0.0, POINT_LAMP["height"]),
                                    POINT_LAMP["radius"], point_radiance(), n)
+    elif CONE_LIGHTS.get(env_key, ("",))[0] == "image":
+        from .scenes import hdri_spot
+
+        spot = hdri_spot(env_key, None)
+
+        def term(n):  # per pixel cell: a quarter of the cone rule's radial nodes, squared
+            return image_world_term(layout, specs, spot, max(2, n[0] // 4))
     elif env_key == "area":
         from .scenes import area_lamp_axes
 

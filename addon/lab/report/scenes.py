@@ -8,8 +8,8 @@ import numpy as np
 
 from .. import grid
 from ..native import native_source
-from .config import (AREA_LAMP, CONE_LIGHTS, POINT_LAMP, SPOT_STRENGTH, SUN_ANGLE_DEG,
-                     SUN_STRENGTH, SUN_WORLD)
+from .config import (AREA_LAMP, CONE_LIGHTS, HDRI_SIZE, POINT_LAMP, SPOT_STRENGTH,
+                     SUN_ANGLE_DEG, SUN_STRENGTH, SUN_WORLD)
 from .references import sun_unit
 
 
@@ -80,7 +80,7 @@ def cone_radiance(env_key, sun_cal) -> tuple:
     kind, angle = CONE_LIGHTS[env_key]
     half = math.radians(angle) / 2.0
     formula = 1.0 / (2.0 * math.pi * (1.0 - math.cos(half)))
-    if kind == "world":
+    if kind in ("world", "image"):
         return SPOT_STRENGTH * formula, half
     return SUN_STRENGTH * formula * sun_cal["radiance"] / sun_cal["formula"], half
 
@@ -105,6 +105,49 @@ def add_spot_world(scene, radiance: float, half: float):
     tree.links.new(dot.outputs["Value"], inside.inputs[0])
     tree.links.new(inside.outputs["Value"], level.inputs[0])
     tree.links.new(level.outputs["Value"], background.inputs["Color"])
+
+
+def spot_image(width: int, height: int, direction, half: float, radiance: float):
+    """(H, W) radiance of an equirectangular world that is black but for the pixels whose
+    centre lies within `half` of `direction` (an HDRI's sun, drawn in pixels)."""
+    from ...world_spots import equirect_direction
+
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    centres = equirect_direction(u[None, :], v[:, None])
+    d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    return np.where(centres @ d >= math.cos(half), float(radiance), 0.0)
+
+
+def hdri_spot(env_key, sun_cal) -> np.ndarray:
+    """The spot of an "image" cone light in pixels (HDRI_SIZE), black around it."""
+    radiance, half = cone_radiance(env_key, sun_cal)
+    return spot_image(*HDRI_SIZE, sun_unit(), half, radiance)
+
+
+def add_image_world(scene, radiance, name="Microfacet Lab image world"):
+    """Set the scene's world to an Environment Texture of the grey `radiance` (H, W) image,
+    Closest interpolation (each pixel a cell of constant radiance, as the reference assumes)."""
+    import bpy
+
+    from ... import compat
+
+    radiance = np.asarray(radiance, dtype=np.float32)
+    height, width = radiance.shape
+    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True)
+    rgba = np.repeat(radiance[..., None], 4, axis=-1)
+    rgba[..., 3] = 1.0
+    image.pixels.foreach_set(rgba.reshape(-1))
+    world = compat.new_node_world(name)
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    texture = tree.nodes.new("ShaderNodeTexEnvironment")
+    texture.image = image
+    texture.interpolation = "Closest"
+    tree.links.new(texture.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = 1.0
+    scene.world = world
+    return world
 
 
 def calibrate_sun(progress) -> dict:
@@ -165,6 +208,8 @@ def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
     harness.build_grid_scene(layout, mats, env_for(env_key), 1, cfg.seed)
     if env_key in CONE_LIGHTS and CONE_LIGHTS[env_key][0] == "lamp":
         add_sun(scene, angle_deg=CONE_LIGHTS[env_key][1])
+    elif env_key in CONE_LIGHTS and CONE_LIGHTS[env_key][0] == "image":
+        add_image_world(scene, SUN_WORLD + hdri_spot(env_key, sun_cal))
     elif env_key in CONE_LIGHTS:
         add_spot_world(scene, *cone_radiance(env_key, sun_cal))
     elif env_key == "point":

@@ -1,0 +1,119 @@
+"""Bright spots of the world as cone records (numpy only, no bpy): an HDRI's sun found in its
+pixels, or the Sky Texture's sun disc.
+
+A Microfacet Lab residual aims at a world spot as at a sun lamp (addon/lamps.py: a record only
+guides where rays go, so a spot found too big, too small or in the wrong place changes the
+noise, never the converged image). addon/handover.py reads the world's nodes and hands the
+spots over with the lamps.
+
+Conventions are Cycles' (kernel/camera/projection.h): an equirectangular image maps the
+direction d to u = 1/2 - atan2(d_y, d_x) / (2 pi), v = 1 - acos(d_z) / pi, with image row 0 at
+v = 0 (the bottom, Blender's pixel order).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .lamps import LUMINANCE, sun_record
+
+# At most this many spots per world texture (each costs the shader a record per sample).
+MAX_SPOTS = 2
+# A pixel belongs to a spot when its radiance is over this many times the world's mean.
+SPOT_CONTRAST = 20.0
+# A spot is handed over when it carries at least this share of the world's power.
+MIN_SPOT_SHARE = 0.05
+# Bright pixels this far from a spot's brightest pixel are not part of it (a spot is small).
+MAX_SPOT_HALF_ANGLE = math.radians(10.0)
+
+
+def equirect_direction(u, v) -> np.ndarray:
+    """Unit directions (..., 3) that Cycles' equirectangular map sends to (u, v)."""
+    u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
+    phi = math.pi - 2.0 * math.pi * u
+    theta = math.pi * (1.0 - v)
+    st = np.sin(theta)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], -1)
+
+
+def row_solid_angles(height: int, width: int) -> np.ndarray:
+    """Solid angle of one pixel in each image row (row 0 at the bottom): (height,)."""
+    z = np.cos(math.pi * (1.0 - np.arange(height + 1) / height))  # cos(theta) at row edges
+    return (2.0 * math.pi / width) * np.diff(z)
+
+
+def luminance(pixels: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of (H, W, >=3) linear pixels; NaN, infinite and negative values as 0."""
+    lum = np.tensordot(np.asarray(pixels[..., :3], dtype=np.float64), LUMINANCE, axes=1)
+    lum = np.nan_to_num(lum, nan=0.0, posinf=0.0, neginf=0.0)
+    return np.maximum(lum, 0.0)
+
+
+def _cell_corners(rows, cols, height, width) -> np.ndarray:
+    """Corner directions of pixels (rows, cols): (n, 4, 3)."""
+    du, dv = np.meshgrid([0.0, 1.0], [0.0, 1.0])
+    u = (cols[:, None] + du.reshape(-1)) / width
+    v = (rows[:, None] + dv.reshape(-1)) / height
+    return equirect_direction(u, v)
+
+
+def _spot(rows, cols, power, height, width):
+    """(axis, half-angle, power) of the cone around the pixels (rows, cols) of `power` each:
+    the axis is their power-weighted mean direction, the cone holds every corner."""
+    centres = equirect_direction((cols + 0.5) / width, (rows + 0.5) / height)
+    axis = (power[:, None] * centres).sum(0)
+    axis /= np.linalg.norm(axis)
+    corners = _cell_corners(rows, cols, height, width)
+    half = float(np.arccos(np.clip(corners @ axis, -1.0, 1.0)).max())
+    return axis, half, float(power.sum())
+
+
+def image_spots(lum: np.ndarray, max_spots: int = MAX_SPOTS) -> list:
+    """The bright spots of an equirectangular luminance image (H, W), brightest first: a list of
+    (axis, half-angle, power), power the spot's irradiance at normal incidence (its luminance
+    integrated over its solid angle, as a sun lamp's strength)."""
+    lum = np.asarray(lum, dtype=np.float64)
+    height, width = lum.shape
+    energy = lum * row_solid_angles(height, width)[:, None]
+    total = float(energy.sum())
+    if not math.isfinite(total) or total <= 0.0:
+        return []
+    rows, cols = np.nonzero(lum > SPOT_CONTRAST * total / (4.0 * math.pi))
+    spots = []
+    while len(rows) and len(spots) < max_spots:
+        top = int(np.argmax(lum[rows, cols]))
+        centres = equirect_direction((cols + 0.5) / width, (rows + 0.5) / height)
+        near = centres @ centres[top] >= math.cos(MAX_SPOT_HALF_ANGLE)
+        axis, half, power = _spot(rows[near], cols[near], energy[rows[near], cols[near]],
+                                  height, width)
+        if power < MIN_SPOT_SHARE * total:
+            break
+        spots.append((axis, half, power))
+        rows, cols = rows[~near], cols[~near]
+    return spots
+
+
+def sky_sun_direction(elevation: float, rotation: float) -> np.ndarray:
+    """Direction toward the Sky Texture's sun disc (Cycles' svm sky: spherical_to_direction(
+    elevation - pi/2, rotation' - pi/2), rotation' = 2 pi - rotation as Cycles patches it)."""
+    ce = math.cos(elevation)
+    return np.array([ce * math.sin(rotation), ce * math.cos(rotation), math.sin(elevation)])
+
+
+def spot_records(spots, rotation=None, scale: float = 1.0) -> list:
+    """LampRecords (kind "sun") of spots (axis, half-angle, power) found in texture space:
+    `rotation` (3x3) maps a world direction to the texture's lookup direction (None: the same),
+    `scale` multiplies the power (the Background's strength)."""
+    records = []
+    for axis, half, power in spots:
+        d = np.asarray(axis, dtype=float)
+        if rotation is not None:
+            d = np.asarray(rotation, dtype=float).T @ d  # a rotation's inverse
+        p = power * scale
+        if not math.isfinite(p) or p <= 0.0:
+            continue
+        record = sun_record(tuple(d), 2.0 * half, min(p, 1e20))
+        if record is not None:
+            records.append(record)
+    return records

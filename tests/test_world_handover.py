@@ -1,0 +1,135 @@
+"""The world's bright spots handed over to the shaders (addon/world_lights.py), headless Cycles.
+
+What this catches: a spot handed over somewhere other than where Cycles draws it (read off a
+mirror sphere: an HDRI's sun, the same through a rotating Mapping node, the Sky Texture's sun
+disc in each Blender version's sky types), a world the add-on cannot read that breaks the
+hand-over or hands a wrong spot over (a spot painted with math nodes, a linked strength, a
+mirror-ball image), an artist's camera-ray trick (Mix Shader on Is Camera Ray) that hides the
+lighting background, and a render that does not write the spot into the shaders' table."""
+import math
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.render
+
+bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
+
+from addon import compat, handover, world_lights  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
+from addon.lab.report.scenes import add_image_world, add_spot_world, spot_image  # noqa: E402
+
+SPOT = np.array([0.6, 0.48, 0.64]) / np.linalg.norm([0.6, 0.48, 0.64])
+MIRROR = grid.GridLayout(1, 1, cell_px=200)
+
+
+def _mirror_scene():
+    scene = harness.new_scene()
+    mats = [harness.model_material("walter_reflection",
+                                   {"roughness": 0.0, "fresnel_type": "none"}, "mirror")]
+    harness.build_grid_scene(MIRROR, mats, grid.Environment("black", 0.0), 1, 0)
+    return scene
+
+
+def _drawn_direction(scene) -> np.ndarray:
+    """Mean mirror direction of the sphere's brightest pixels (over half the maximum)."""
+    image, _ = harness.render(scene)
+    index, normal, _ = MIRROR.pixel_geometry()
+    wo = 2.0 * normal[..., 2:3] * normal - grid.VIEW
+    lum = image[..., :3].mean(-1)
+    sel = index == 0
+    top = lum[sel] > 0.5 * lum[sel].max()
+    d = wo[sel][top].mean(0)
+    return d / np.linalg.norm(d)
+
+
+def _angle_deg(a, b) -> float:
+    return math.degrees(math.acos(min(1.0, float(np.dot(a, b)))))
+
+
+def _tree(scene):
+    tree = scene.world.node_tree
+    return tree, next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+
+
+def _rotate_lookup(scene, rotation):
+    tree, _ = _tree(scene)
+    texture = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = rotation
+    tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
+
+
+def _sky_world(scene):
+    world = compat.new_node_world("sky")
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    sky = tree.nodes.new("ShaderNodeTexSky")
+    types = {i.identifier for i in sky.bl_rna.properties["sky_type"].enum_items}
+    sky.sky_type = sorted(types & compat.SKY_TYPES_WITH_SUN_DISC)[0]
+    sky.sun_size = math.radians(8.0)
+    sky.sun_elevation = math.radians(35.0)
+    sky.sun_rotation = math.radians(200.0)
+    tree.links.new(sky.outputs["Color"], background.inputs["Color"])
+    scene.world = world
+
+
+@pytest.mark.parametrize("world", ["image", "rotated image", "sky"])
+def test_a_world_spot_is_handed_over_where_cycles_draws_it(world):
+    scene = _mirror_scene()
+    if world == "sky":
+        _sky_world(scene)
+    else:
+        add_image_world(scene, spot_image(128, 64, SPOT, math.radians(5.0), 100.0))
+        if world == "rotated image":
+            _rotate_lookup(scene, (0.3, -0.2, 1.1))
+    (record,) = world_lights.world_records(scene)
+    drawn = _drawn_direction(scene)
+    # The mirror's pixels step by about 1 degree in reflected direction near this spot.
+    assert _angle_deg(np.array(record.axis), drawn) < 1.5, (record.axis, drawn)
+    half = math.degrees(math.acos(1.0 - record.size))
+    assert 3.5 < half < 8.0 if world != "sky" else abs(half - 4.0) < 1e-3
+
+
+def test_worlds_the_add_on_cannot_read_hand_nothing_over():
+    scene = _mirror_scene()
+    add_spot_world(scene, 100.0, math.radians(3.0))  # painted with math nodes
+    assert world_lights.world_records(scene) == []
+    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(5.0), 100.0))
+    tree, background = _tree(scene)
+    value = tree.nodes.new("ShaderNodeValue")
+    tree.links.new(value.outputs[0], background.inputs["Strength"])
+    assert world_lights.world_records(scene) == []  # a linked strength
+    tree.links.remove(background.inputs["Strength"].links[0])
+    texture = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+    texture.projection = "MIRROR_BALL"
+    assert world_lights.world_records(scene) == []
+    scene.world = None
+    assert world_lights.world_records(scene) == []
+
+
+def test_a_camera_ray_mix_still_finds_the_lighting_background():
+    scene = _mirror_scene()
+    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
+    tree, background = _tree(scene)
+    output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld")
+    plain = tree.nodes.new("ShaderNodeBackground")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    path = tree.nodes.new("ShaderNodeLightPath")
+    tree.links.new(path.outputs["Is Camera Ray"], mix.inputs[0])
+    tree.links.new(background.outputs[0], mix.inputs[1])
+    tree.links.new(plain.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], output.inputs["Surface"])
+    (record,) = world_lights.world_records(scene)
+    assert np.dot(record.axis, SPOT) > math.cos(math.radians(3.0))
+
+
+def test_a_render_writes_the_world_spot_into_the_shaders():
+    scene = _mirror_scene()
+    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
+    assert handover.scene_lamps(scene) == [] and len(handover.scene_records(scene)) == 1
+    changed = handover.hand_over(scene)
+    assert changed and all(name.startswith("MicrofacetLab_") for name in changed)
+    assert handover.hand_over(scene) == []  # nothing changed: nothing recompiled

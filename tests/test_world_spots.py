@@ -1,0 +1,99 @@
+"""The world's bright spots found in an equirectangular image (addon/world_spots.py, numpy only).
+
+What this catches: a direction convention that does not invert the image mapping (the spot
+would be handed over where it is not: noise, not bias, so only this test and the render test
+in tests/test_handover.py see it), pixel solid angles that do not sum to the sphere (a wrong
+spot power against the lamps'), a cone that does not hold the spot's pixels, spots split at
+the image's seam or pole, a uniform or faint world handed over as spots, and NaN, infinite or
+negative pixels that reach the records. Tolerances: exact identities to rounding, and the
+pixel size for directions."""
+import math
+
+import numpy as np
+import pytest
+
+from addon import world_spots as ws
+
+W, H = 128, 64
+
+
+def _spot(direction, half, radiance=100.0, background=0.1):
+    u = (np.arange(W) + 0.5) / W
+    v = (np.arange(H) + 0.5) / H
+    centres = ws.equirect_direction(u[None, :], v[:, None])
+    d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    inside = centres @ d >= math.cos(half)
+    return np.where(inside, radiance, background), inside, centres
+
+
+def test_equirect_direction_inverts_cycles_mapping():
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(1000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    # Cycles' direction_to_equirectangular_range with range (-2 pi, pi, -pi, pi).
+    u = (np.arctan2(d[:, 1], d[:, 0]) - math.pi) / (-2.0 * math.pi)
+    v = (np.arccos(d[:, 2]) - math.pi) / (-math.pi)
+    assert np.abs(ws.equirect_direction(u, v) - d).max() < 1e-12
+
+
+def test_pixel_solid_angles_sum_to_the_sphere():
+    omega = ws.row_solid_angles(H, W)
+    assert (omega > 0).all()
+    assert abs(omega.sum() * W - 4.0 * math.pi) < 1e-12
+    assert np.allclose(omega, omega[::-1])  # symmetric about the horizon
+
+
+@pytest.mark.parametrize("direction", [(0.6, 0.48, 0.64), (-1.0, 0.0, 0.1), (0.0, 0.1, 1.0)],
+                         ids=["sun", "seam", "pole"])
+def test_a_spot_is_found_where_it_is_drawn(direction):
+    half = math.radians(4.0)
+    image, inside, centres = _spot(direction, half)
+    (axis, found_half, power), = ws.image_spots(ws.luminance(np.repeat(image[..., None], 3, -1)))
+    d = np.asarray(direction) / np.linalg.norm(direction)
+    pixel = math.pi / H
+    assert math.acos(min(1.0, float(axis @ d))) < pixel
+    # The cone holds every drawn pixel's centre, and is not much wider than the spot.
+    assert (centres[inside] @ axis >= math.cos(found_half)).all()
+    assert found_half < half + 2.0 * pixel
+    omega = ws.row_solid_angles(H, W)[:, None] * np.ones((1, W))
+    assert power == pytest.approx(float((image * omega)[inside].sum()), rel=1e-12)
+
+
+def test_two_spots_brightest_first_and_faint_or_uniform_worlds_none():
+    a, _, _ = _spot((0.6, 0.48, 0.64), math.radians(3.0), radiance=50.0, background=0.0)
+    b, _, _ = _spot((-0.5, 0.2, 0.3), math.radians(5.0), radiance=80.0, background=0.0)
+    spots = ws.image_spots(a + b)
+    assert len(spots) == 2 and spots[0][2] > spots[1][2]
+    assert spots[0][0] @ (np.array([-0.5, 0.2, 0.3]) / np.linalg.norm([-0.5, 0.2, 0.3])) > 0.99
+    assert ws.image_spots(np.full((H, W), 3.0)) == []
+    faint, _, _ = _spot((0.6, 0.48, 0.64), math.radians(1.0), radiance=25.0, background=1.0)
+    assert ws.image_spots(faint) == []  # bright enough, but under 5% of the world's power
+
+
+def test_bad_pixels_never_reach_the_records():
+    image, _, _ = _spot((0.6, 0.48, 0.64), math.radians(4.0))
+    rgb = np.repeat(image[..., None], 3, -1)
+    rgb[0, 0] = np.nan
+    rgb[1, 1] = np.inf
+    rgb[2, 2] = -1e30
+    lum = ws.luminance(rgb)
+    assert np.isfinite(lum).all() and (lum >= 0).all()
+    (record,) = ws.spot_records(ws.image_spots(lum), scale=2.0)
+    assert record.kind == "sun" and all(math.isfinite(x) for x in record.floats())
+    assert ws.spot_records(ws.image_spots(lum), scale=float("nan")) == []
+    assert ws.image_spots(np.zeros((H, W))) == []
+
+
+def test_a_rotation_maps_the_spot_back_to_the_world():
+    """The texture looks up R d: a spot drawn at t in the image lies at R^T t in the world."""
+    c, s = math.cos(0.7), math.sin(0.7)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    t = np.array([0.6, 0.48, 0.64])
+    (record,) = ws.spot_records([(t, 0.05, 1.0)], rotation=rot)
+    assert np.allclose(rot @ np.array(record.axis), t)
+
+
+def test_sky_sun_direction():
+    assert np.allclose(ws.sky_sun_direction(math.pi / 2, 1.0), [0.0, 0.0, 1.0])
+    assert np.allclose(ws.sky_sun_direction(0.0, 0.0), [0.0, 1.0, 0.0])  # rotation 0: +Y
+    assert np.allclose(ws.sky_sun_direction(0.0, math.pi / 2), [1.0, 0.0, 0.0])
