@@ -225,12 +225,14 @@ vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u
 // controls could sum above r), are narrower than MFL_CONTROL_MIN_HALF_ANGLE (Cycles clamps a
 // toon's size at 1e-5; and a needle-sharp toon beside the delta residual meets Cycles' 1e6
 // stand-in pdf for deltas), or weigh less than MFL_CONTROL_MIN_WEIGHT even after widening
-// (Cycles drops closures below 1e-5: a Mix Shader factor down to 0.01 keeps every control). A
+// (Cycles drops closures below 1e-5: a Mix Shader factor down to 0.1 keeps every control, as
+// it keeps every delta lobe, MFL_MIN_DELTA_WEIGHT; 1e-3 left most controls out under a
+// 0.5-degree sun, whose cones hold 6e-5 sr: a rough Beckmann sphere 3.5 times noisier). A
 // small lamp's cone is widened once (control_cone) where its weight, about the lobe's value
 // times the cone's solid angle, would fall below that; weights are lowered by
 // MFL_CONTROL_MARGIN against float rounding in r.
 #define MFL_CONTROL_SLOTS 4
-#define MFL_CONTROL_MIN_WEIGHT 1e-3
+#define MFL_CONTROL_MIN_WEIGHT 1e-4
 #define MFL_CONTROL_MARGIN 1e-3
 #define MFL_CONTROL_GROW_CAP 0.5
 #define MFL_CONTROL_GROW_MAX 0.1

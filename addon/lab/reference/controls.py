@@ -28,14 +28,14 @@ from .split import conductor_min, supports_split
 
 # osl/lamps.h MFL_CONTROL_*: at most this many controls per shading point; a control whose mean
 # weight is below MIN_WEIGHT is widened or left out (Cycles drops closures below 1e-5, so a
-# Mix Shader factor down to 0.01 keeps every control); GROW_CAP, GROW_MAX: how far a small
+# Mix Shader factor down to 0.1 keeps every control, as for delta lobes); GROW_CAP, GROW_MAX: how far a small
 # lamp's cone may be widened (times alpha_min, radians); weights are lowered
 # by MARGIN against float rounding in the shader's residual; cones narrower than MIN_HALF_ANGLE
 # are left out (Cycles clamps a toon's size to 1e-5 of pi/2, and a sharp toon beside the delta
 # residual would meet Cycles' 1e6 stand-in pdf for deltas); the cone must clear the horizons
 # of N and Ng by HORIZON_MARGIN (cos).
 CONTROL_SLOTS = 4
-MIN_WEIGHT = 1e-3
+MIN_WEIGHT = 1e-4
 MARGIN = 1e-3
 GROW_CAP = 0.5
 GROW_MAX = 0.1
