@@ -405,3 +405,39 @@ def _lamp_count_in_texts() -> int:
     text = bpy.data.texts[shaders.text_name(MODELS["walter_reflection"])].as_string()
     line = next(l for l in text.splitlines() if l.startswith("#define MFL_LAMP_COUNT"))
     return int(line.split()[-1])
+
+
+# A Mix Shader scales every closure weight before Cycles' cutoff (1e-5) applies. The shaders keep
+# their lamp controls and delta lobes at 1e-4 or more (MFL_CONTROL_MIN_WEIGHT and
+# MFL_MIN_DELTA_WEIGHT), so a factor of 0.2 keeps every part, under a 0.5-degree sun where those weights are smallest.
+# What this catches: a weight floor lowered below that margin (Cycles then drops a control or a
+# residual lobe, and its light with it: the sphere comes out dark; with both floors at 2e-5 this
+# test fails).
+MIX_FACTOR = 0.2
+
+
+def _mix_materials(factor):
+    for material in bpy.data.materials:
+        tree = material.node_tree
+        group = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup"), None) \
+            if tree is not None else None
+        if group is None:
+            continue
+        output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        mix.inputs[0].default_value = factor  # Shader 1 left empty: (1 - factor) of nothing
+        tree.links.new(group.outputs["BSDF"], mix.inputs[2])
+        tree.links.new(mix.outputs[0], output.inputs["Surface"])
+
+
+def test_a_mix_shader_factor_of_0_2_keeps_every_part_under_a_half_degree_sun():
+    def add_light(scene):
+        _mix_materials(MIX_FACTOR)
+        add_sun(scene, strength=SUN_STRENGTH, angle_deg=TINY_SUN_DEG)
+
+    layout, image = _render_row(TINY_SUN_ROW, add_light, 19)
+    half = math.radians(TINY_SUN_DEG) / 2
+    radiance = MIX_FACTOR * SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
+    layout, image, reference, quad_err = _with_quadrature_error(layout, image, lambda n: sun_term(
+        layout, TINY_SUN_ROW, radiance, half, n), (16, 32))
+    _assert_bands_match(layout, TINY_SUN_ROW, image, reference, quad_err, power=0.1)
