@@ -16,6 +16,10 @@ NATIVE = {
     # Exact conductor Fresnel with complex IOR n + ik.
     "conductor": ('BSDF = conductor_bsdf(N, vector(0), {alpha:.9g}, {alpha:.9g}, '
                   'color({n[0]}, {n[1]}, {n[2]}), color({k[0]}, {k[1]}, {k[2]}), "ggx");'),
+    # Cycles' multiscatter GGX conductor (single-scattering GGX scaled to preserve energy):
+    # what Cycles offers for multiple scattering, the comparison for Lee's V-grooves.
+    "multi_ggx": ('BSDF = conductor_bsdf(N, vector(0), {alpha:.9g}, {alpha:.9g}, '
+                  'color({n[0]}, {n[1]}, {n[2]}), color({k[0]}, {k[1]}, {k[2]}), "multi_ggx");'),
     # Rough dielectric; Cycles flips the IOR on back faces itself.
     "glass": ('BSDF = dielectric_bsdf(N, vector(0), color(1), color(1), {alpha:.9g}, {alpha:.9g}, '
               '1.5, "ggx");'),

@@ -84,18 +84,24 @@ def _frame(axis):
     return t, np.cross(axis, t)
 
 
+def sample_cone(axis, one_minus_cos, u1, u2):
+    """Uniform directions in the cones around `axis` (..., 3) with the given 1 - cos(half-angle)
+    (osl sample_cone)."""
+    s = u1 * one_minus_cos
+    sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
+    phi = 2.0 * np.pi * u2
+    t, b = _frame(axis)
+    return ((sin_t * np.cos(phi))[..., None] * t + (sin_t * np.sin(phi))[..., None] * b
+            + (1.0 - s)[..., None] * axis)
+
+
 def sample_lamp(rec: LampRecord, P, u1, u2):
     """A direction toward the lamp from P, drawn from p_i (uniform over the cone or the area)."""
     P = np.asarray(P, dtype=float)
     u1, u2 = np.broadcast_arrays(np.asarray(u1, dtype=float), np.asarray(u2, dtype=float))
     if rec.kind in ("sun", "sphere"):
         axis, omc, _, _ = _cone(rec, P)
-        s = u1 * omc
-        sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
-        phi = 2.0 * np.pi * u2
-        t, b = _frame(axis)
-        return ((sin_t * np.cos(phi))[..., None] * t + (sin_t * np.sin(phi))[..., None] * b
-                + (1.0 - s)[..., None] * axis)
+        return sample_cone(axis, omc, u1, u2)
     if rec.kind == "ellipse":
         r = np.sqrt(u1)
         s, t = r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)

@@ -1127,7 +1127,7 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (..., 10)
     uniforms: 0-2 the sampler, 6 the branch, 7-9 the cone."""
     from . import controls
-    from .lamps import GUIDE_FRACTION, _frame
+    from .lamps import GUIDE_FRACTION, sample_cone
 
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
@@ -1146,12 +1146,7 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
         if np.any(sel):
             a = np.broadcast_to(axis, (n, 3))[sel]
             omc = 2.0 * np.sin(0.5 * np.broadcast_to(th, (n,))[sel]) ** 2
-            s = u[sel, 8] * omc
-            sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
-            phi = 2.0 * np.pi * u[sel, 9]
-            t, b = _frame(a)
-            wo[sel] = ((sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b
-                       + (1.0 - s)[:, None] * a)
+            wo[sel] = sample_cone(a, omc, u[sel, 8], u[sel, 9])
     p_aim = np.zeros(n)
     inside = np.zeros(n, bool)
     for j, (axis, th, _, _) in enumerate(terms):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from .config import MU_MIN_RMSE
 from .references import reference_image, relative_rmse
-from .rows import specs_for
+from .rows import self_referenced, specs_for
 from .scenes import build_env_scene, optix_devices
 
 
@@ -26,6 +26,7 @@ def optix_comparison(cfg, rows, tables, progress) -> dict:
     difference against each one's own error to the reference)."""
     from .. import harness
 
+    rows = [row for row in rows if not self_referenced(row)]  # no reference image to share
     spp = cfg.samples[-1]
     result = {}
     for device in ("CPU", "OPTIX"):
