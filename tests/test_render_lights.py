@@ -385,7 +385,7 @@ def test_lee_native_and_residual_matches_the_small_sun_reference():
 # handed over (the residual stays unaimed: 16 times the RMSE at 64 samples, measured, too
 # noisy for the power check), a spot handed over with a density the shaders do not sample.
 WORLD_SPOT_ROW = AIMED_ROW[:3]
-WORLD_SPOT_SAMPLES = AIMED_SAMPLES
+WORLD_SPOT_SAMPLES = 2 * AIMED_SAMPLES  # 512 left 4.2.23 just short of the power check
 
 
 def test_aimed_residual_matches_an_image_world_spot():
