@@ -182,23 +182,33 @@ def _plot_env_curves(ax, series, rows, colors):
     ax.axhline(TARGET, color="0.6", lw=0.8)
 
 
+PANEL_COLUMNS = 4  # environments per row of panels (eight in one row were too wide to read)
+
+
 def plot_convergence(conv, rows, path, dpi=72):
     plt = _plt()
     envs = list(conv["envs"])
-    fig, axes = plt.subplots(1, len(envs), figsize=(4.3 * len(envs) + 2.6, 4.2), dpi=dpi,
+    ncols = min(PANEL_COLUMNS, len(envs))
+    nrows = -(-len(envs) // ncols)
+    legend = 4.0  # inches kept free for the legend on the right
+    width = 4.3 * ncols + legend
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 4.2 * nrows), dpi=dpi,
                              squeeze=False)
     variants = list(dict.fromkeys(r.variant for r in rows))
     colors = {v: plt.cm.tab10(i % 10) for i, v in enumerate(variants)}
-    for ax, env_key in zip(axes[0], envs):
+    for ax in axes.flat[len(envs):]:
+        ax.set_visible(False)
+    for ax, env_key in zip(axes.flat, envs):
         _plot_env_curves(ax, conv["envs"][env_key]["series"], rows, colors)
         ax.set_title(ENV_TITLES.get(env_key, env_key), fontsize=9)
         ax.set_xlabel("render time per row (s)", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
-    axes[0][0].set_ylabel("relative RMSE vs numpy reference", fontsize=8)
-    handles, labels = axes[0][-1].get_legend_handles_labels()
+    for line in axes:
+        line[0].set_ylabel("relative RMSE vs numpy reference", fontsize=8)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="center right", fontsize=6.5, frameon=False)
-    fig.tight_layout(rect=(0, 0, 1 - 2.5 / (4.3 * len(envs) + 2.6), 1))
+    fig.tight_layout(rect=(0, 0, 1 - legend / width, 1))
     fig.savefig(path)
     plt.close(fig)
 
