@@ -339,14 +339,14 @@ LEE_VGROOVE = _add(Model(
               doc="How many bounces inside a groove get their Fresnel colour: 0 chooses from "
                   "the roughness; a low limit renders faster but leaves later bounces "
                   "uncoloured, so deep grooves come out brighter and paler."),
-        # Symmetric grooves: the first bounce toward each lamp is light-sampled by Cycles and
-        # the first two bounces are aimed at the lamps (docs/light-sampling.md, "Lee").
+        # The first six bounces are aimed at the lamps; for symmetric grooves the first bounce
+        # toward each lamp is also light-sampled by Cycles (docs/light-sampling.md, "Lee").
         Param("estimator", "Light Sampling", ENUM, "light_sampled", items=ENUMS["estimator"],
-              doc="Native + Residual (Symmetric grooves) lets Cycles aim rays at the scene's "
-                  "lamps for the first bounce inside a groove, and aims the first two bounces "
-                  "at them too, so highlights from small lamps clear up fast; longer paths and "
-                  "Asymmetric grooves find lamps by chance. Stochastic finds all of it by "
-                  "chance. Both converge to the same image."),
+              doc="Native + Residual aims the first six bounces inside a groove at the scene's "
+                  "lamps, and with Symmetric grooves also lets Cycles aim rays at the lamps for "
+                  "the first bounce, so highlights from small lamps clear up fast; longer paths "
+                  "find lamps by chance. Stochastic finds all of it by chance. Both converge to "
+                  "the same image."),
     ),
 ))
 

@@ -328,10 +328,9 @@ def test_aimed_residual_matches_the_area_lamp_reference(area_render):
     _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)
 
 
-# Lee's V-grooves under the large sun of the first test: symmetric grooves with Native + Residual
-# (lamp controls on the first bounce, the first bounces aimed), asymmetric ones stochastic (their
-# delta lobe finds the sun by chance, which under a sun this large still converges); gold,
-# roughness 0.6. What this catches: a Lee shader that is right under environment light but
+# Lee's V-grooves under the large sun of the first test, with Native + Residual: symmetric grooves
+# (lamp controls on the first bounce, the first bounces aimed) and asymmetric ones (the first
+# bounces aimed with a Monte Carlo estimate of their terms, no controls); gold, roughness 0.6. What this catches: a Lee shader that is right under environment light but
 # wrong toward a lamp (the sun's radiance convention, the grooves' lobe away from the mirror
 # direction), or one that leaks light through an occluder (the shadowed sphere must be exactly
 # 0). Small cells keep the numpy sun term (about 3e6 Lee evaluations, 20 s) short.
@@ -359,14 +358,15 @@ def test_lee_matches_the_sun_reference(lee_sun_render):
     _assert_bands_match(layout, LEE_ROW, image, ref, quad_err, power=0.05)
 
 
-# Lee's symmetric grooves under the 4-degree sun, where the stochastic lobe alone is far too
-# noisy to test (its sun-lit second moment is 30-300 times the Native + Residual one at
-# roughness 0.6 and 0.3, tests/test_reference_controls.py). What this catches: a first-bounce
-# control that is not below the model, aimed bounce terms (lee_low_orders) that are not the
+# Lee's grooves under the 4-degree sun, where the stochastic lobe alone is far too noisy to test
+# (its sun-lit second moment is 30-300 times the Native + Residual one for symmetric grooves at
+# roughness 0.6 and 0.3, 28 times for asymmetric ones at 0.6; tests/test_reference_controls.py).
+# What this catches: a first-bounce control that is not below the model, aimed bounce terms
+# (lee_low_orders, the asymmetric Monte Carlo rule lee_low_orders_asymmetric) that are not the
 # model's (too bright or dark toward the sun), a path exit counted twice or dropped outside the
 # aimed cones.
-LEE_SMALL_ROW = [SphereSpec("lee_vgroove", {"roughness": r}, f"Lee symmetric r{r}")
-                 for r in (0.3, 0.6)]
+LEE_SMALL_ROW = [SphereSpec("lee_vgroove", {"roughness": r, "groove": g}, f"Lee {g} r{r}")
+                 for g, r in (("symmetric", 0.3), ("symmetric", 0.6), ("asymmetric", 0.6))]
 LEE_SMALL_SAMPLES = 1024
 
 

@@ -582,7 +582,7 @@ def _partner_window(theta_i, theta_o, k: int):
 
 
 def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = None,
-                    n_partner: int = 12, fresnel_bounces: int | None = None):
+                    n_partner: int = 12, fresnel_bounces: int | None = None, u=None):
     """Asymmetric-groove BRDF f(wi, wo) (RGB, without the cosine), k = 1..kmax, isotropic D
     (docs/lee-asymmetric-grooves.md sec. 5):
 
@@ -606,7 +606,12 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
     f(wi, wo) = f(wo, wi) to rounding. The integrand has kinks where len_k reaches 0, so the
     rule converges algebraically (measured in the doc). fresnel is tabulated (FresnelTable:
     exact at 8193 nodes, interpolation error < 1e-7). kmax and fresnel_bounces as in eval():
-    the terms summed, and Max Bounces (the bounces that get their Fresnel factor)."""
+    the terms summed, and Max Bounces (the bounces that get their Fresnel factor).
+
+    u: (..., 2, kmax, 2) uniforms (frame, k, side) turn the rule into its one-node Monte Carlo
+    form: one node per side, frame and k, uniform in the variable (weight: the interval), an
+    unbiased estimate of the same sum (lee_low_orders_asymmetric in osl/lee_vgroove.osl, which
+    the Native + Residual shader evaluates on its aimed samples)."""
     if abs(mf.alpha_x - mf.alpha_y) > 1e-12 * mf.alpha_x:
         raise ValueError("asymmetric grooves are implemented for isotropic D only")
     fresnel = fresnel or fresnel_fn("none")
@@ -622,8 +627,11 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
         kmax = max_bounces(alpha, mf.distribution, "asymmetric")
     n_f = kmax if fresnel_bounces is None else max(int(fresnel_bounces), 1)
     Z = partner_norm(mf.distribution, alpha)
-    x, w = np.polynomial.legendre.leggauss(n_partner)
-    x, w = 0.5 * (x + 1.0), 0.5 * w  # on [0, 1]
+    x_gl, w_gl = np.polynomial.legendre.leggauss(n_partner)
+    x_gl, w_gl = 0.5 * (x_gl + 1.0), 0.5 * w_gl  # on [0, 1]
+    if u is not None:
+        u = np.broadcast_to(np.asarray(u, dtype=float), shape[:-1] + (2, kmax, 2))
+        u = u.reshape(-1, 2, kmax, 2)
     h = wi + wo
     t0, _ = groove_frame(h)
     hh = np.maximum(np.hypot(h[:, 0], h[:, 1]), 1e-12)  # |(wi + wo).t|; see eval()
@@ -646,9 +654,9 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
             T = alpha * y
             return T, alpha / (1.0 + T * T)
 
-    def nodes(v0, v1):
-        """Gauss-Legendre in the variable on [v0, v1]: the wall angles, their sin and cos, and
-        the weights in d theta."""
+    def nodes(v0, v1, x, w):
+        """Nodes x (on [0, 1]) with weights w in the variable on [v0, v1]: the wall angles,
+        their sin and cos, and the weights in d theta."""
         T, d = tan_of(v0[:, None] + (v1 - v0)[:, None] * x)
         c = 1.0 / np.sqrt(1.0 + T * T)
         return np.arctan(T), T * c, c, (v1 - v0)[:, None] * w * d
@@ -656,7 +664,7 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
     def D(s, c):
         return mf.D(np.stack([s, np.zeros_like(s), c], axis=-1))
 
-    for sg in (1.0, -1.0):
+    for frame, sg in enumerate((1.0, -1.0)):
         t = sg * t0
         p_i, p_o = np.sum(wi * t, -1), np.sum(wo * t, -1)
         theta_i = np.arctan2(p_i, wi[:, 2])
@@ -670,19 +678,26 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
             A, a, b = A[idx], a[idx], b[idx]
             sA, cA = np.sin(A)[:, None], np.cos(A)[:, None]
             split = np.clip(A / (1.0 - B), a, b)  # theta_l = theta_r there
+            if u is None:
+                (x1, q1), (x2, q2) = (x_gl, w_gl), (x_gl, w_gl)
+            else:
+                one = np.ones(1)
+                (x1, q1), (x2, q2) = ((u[idx, frame, k - 1, side][:, None], one)
+                                      for side in (0, 1))
+            n1 = np.size(x1, -1)
             # Side 1, theta_r in [a, split]: theta_r is the gentler wall, nodes in its variable.
-            tr1, s_r1, c_r1, w1 = nodes(var(a), var(split))
+            tr1, s_r1, c_r1, w1 = nodes(var(a), var(split), x1, q1)
             # Side 2, theta_r in [split, b]: nodes in theta_l's variable, d theta_r = d theta_l
             # / |B| (k = 1: theta_l = A is fixed, theta_r's variable again).
             if k == 1:
-                tr2, s_r2, c_r2, w2 = nodes(var(split), var(b))
-                tl = np.broadcast_to(A[:, None], (idx.size, 2 * n_partner))
+                tr2, s_r2, c_r2, w2 = nodes(var(split), var(b), x2, q2)
+                tl = np.broadcast_to(A[:, None], tr1.shape[:1] + (tr1.shape[1] + tr2.shape[1],))
                 s_l, c_l = (np.broadcast_to(v, tl.shape) for v in (sA, cA))
                 tr = np.concatenate([tr1, tr2], axis=1)
                 s_r, c_r = np.concatenate([s_r1, s_r2], 1), np.concatenate([c_r1, c_r2], 1)
                 wq = np.concatenate([w1, w2], axis=1)
             else:
-                tl2, s_l2, c_l2, w2 = nodes(var(A + B * b), var(A + B * split))
+                tl2, s_l2, c_l2, w2 = nodes(var(A + B * b), var(A + B * split), x2, q2)
                 tr = np.concatenate([tr1, (A[:, None] - tl2) / -B], axis=1)
                 tl = np.concatenate([A[:, None] + B * tr1, tl2], axis=1)
                 wq = np.concatenate([w1, w2 / -B], axis=1)
@@ -690,8 +705,8 @@ def eval_asymmetric(wi, wo, mf: Microfacet, fresnel=None, kmax: int | None = Non
                     s_l1, c_l1 = sA * c_r1 - cA * s_r1, cA * c_r1 + sA * s_r1
                     s_r2, c_r2 = sA * c_l2 - cA * s_l2, cA * c_l2 + sA * s_l2
                 else:
-                    s_l1, c_l1 = np.sin(tl[:, :n_partner]), np.cos(tl[:, :n_partner])
-                    s_r2, c_r2 = np.sin(tr[:, n_partner:]), np.cos(tr[:, n_partner:])
+                    s_l1, c_l1 = np.sin(tl[:, :n1]), np.cos(tl[:, :n1])
+                    s_r2, c_r2 = np.sin(tr[:, n1:]), np.cos(tr[:, n1:])
                 s_l, c_l = np.concatenate([s_l1, s_l2], 1), np.concatenate([c_l1, c_l2], 1)
                 s_r, c_r = np.concatenate([s_r1, s_r2], 1), np.concatenate([c_r1, c_r2], 1)
             ti = theta_i[idx, None]
@@ -1103,9 +1118,18 @@ class LeeBRDF:
         return E * self.tint, Vn * self.tint, Vt * self.tint
 
 
-# -- Native + Residual (symmetric grooves; osl/lee_vgroove.osl, docs/light-sampling.md "Lee") ---
-# The bounce terms aimed into the lamp controls' cones (osl LEE_AIMED_ORDERS).
+# -- Native + Residual (osl/lee_vgroove.osl, docs/light-sampling.md "Lee") -----------------------
+# The bounce terms aimed into the lamps' cones (osl LEE_AIMED_ORDERS).
 AIMED_ORDERS = 6
+# Uniforms of one Native + Residual sample: 0-5 the sampler (3-5: an asymmetric groove's
+# partner), 6 the branch, 7-9 the cone, then (asymmetric grooves) one per frame, k and side of
+# the aimed terms' Monte Carlo rule (eval_asymmetric's u; osl LEE_PARTNER_DIM).
+PARTNER_DIM = 10
+
+
+def uniforms_needed(groove: str) -> int:
+    """The width of sample_light_sampled's u."""
+    return PARTNER_DIM + (4 * AIMED_ORDERS if groove == "asymmetric" else 0)
 
 
 def first_order(bsdf: LeeBRDF):
@@ -1117,26 +1141,54 @@ def first_order(bsdf: LeeBRDF):
                           bsdf.k, bsdf.tint)
 
 
+def aimed_cones(bsdf: LeeBRDF, records, P, wi):
+    """[(axis, th, w_K, valid)] as controls.control_terms gives them: symmetric grooves have
+    lamp controls on their first bounce (the V-cavity term); an asymmetric groove's first
+    bounce is not that term, so there the cones are the lamps' own, with no control (w_K = 0)."""
+    from . import controls
+
+    if bsdf.groove == "symmetric":
+        return controls.control_terms(first_order(bsdf), records, P, wi)
+    zero = np.zeros(np.shape(wi))
+    Ng = np.broadcast_to(np.array([0.0, 0.0, 1.0]), np.shape(P))
+    return [(axis, np.where(valid, th, controls.MIN_HALF_ANGLE), zero, valid)
+            for axis, th, valid in controls.select_cones(records, P, Ng)]
+
+
+def low_orders(bsdf: LeeBRDF, wi, wo, u):
+    """f_{k<=AIMED_ORDERS}(wi, wo) RGB, tint included: symmetric grooves in closed form (eval),
+    asymmetric ones by the one-node Monte Carlo rule over the partner wall (eval_asymmetric
+    with u[..., PARTNER_DIM:]), an unbiased estimate."""
+    if bsdf.groove == "symmetric":
+        f = eval(wi, wo, bsdf.mf, bsdf._fresnel_table, AIMED_ORDERS, bsdf.kmax)
+    else:
+        uu = np.asarray(u)[..., PARTNER_DIM:PARTNER_DIM + 4 * AIMED_ORDERS]
+        f = eval_asymmetric(wi, wo, bsdf.mf, bsdf._fresnel_table, AIMED_ORDERS,
+                            fresnel_bounces=bsdf.kmax,
+                            u=uu.reshape(uu.shape[:-1] + (2, AIMED_ORDERS, 2)))
+    return f * bsdf.tint
+
+
 def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     """One sample of the Native + Residual estimator (the twin of lee_vgroove.osl): (wo, weight
     RGB of the delta lobe, tint included, terms: the controls as controls.control_terms gives
     them, which ride on every sample). With A the chosen cones (each lamp's, widened where it
-    has a control) and lam = GUIDE_FRACTION where there are any: with probability lam a
-    direction uniform in one of them (each with probability 1 / count), weighted by
-    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p); otherwise a path of the sampler, its exit
-    dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (..., 10)
-    uniforms: 0-2 the sampler, 6 the branch, 7-9 the cone."""
+    has a control; aimed_cones) and lam = GUIDE_FRACTION where there are any: with probability
+    lam a direction uniform in one of them (each with probability 1 / count), weighted by
+    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p) (low_orders); otherwise a path of the sampler,
+    its exit dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (...,
+    uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
     from . import controls
     from .lamps import GUIDE_FRACTION, sample_cone
 
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
-    terms = controls.control_terms(first_order(bsdf), records, P, wi)
+    terms = aimed_cones(bsdf, records, P, wi)
     valid = np.stack([v for *_, v in terms], -1) if terms else np.zeros((n, 0), bool)
     count = valid.sum(-1)
     # The OSL keeps the valid cones first, in table order: the j-th valid one is slot j.
     lam = np.where(count > 0, GUIDE_FRACTION, 0.0)
-    wo_s, w_s, k_s = bsdf.sample(wi, u[..., :3])
+    wo_s, w_s, k_s = bsdf.sample(wi, u[..., :6])
     wo = wo_s.copy()
     aimed = u[:, 6] < lam
     slot = np.minimum(np.floor(u[:, 7] * count), np.maximum(count - 1, 0)).astype(int)
@@ -1154,7 +1206,7 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
         p_aim += t_j
         inside |= t_j > 0.0
     p_aim = np.where(count > 0, p_aim / np.maximum(count, 1), 0.0)
-    low = eval(wi, wo, bsdf.mf, bsdf._fresnel_table, AIMED_ORDERS, bsdf.kmax) * bsdf.tint
+    low = low_orders(bsdf, wi, wo, u)
     r = low * np.maximum(wo[:, 2], 0.0)[:, None] - controls.controls_value(terms, wo)
     ok = p_aim > 0.0
     w_aim = np.where(ok[:, None], np.maximum(r, 0.0) / np.where(ok, lam * p_aim, 1.0)[:, None],
