@@ -43,6 +43,16 @@ def test_osl_constants_match_numpy_tail_ratios():
             assert value == pytest.approx(lee.tail_ratio(dist, groove), rel=1e-8), name
 
 
+def test_osl_aiming_constants_match_numpy():
+    """The Native + Residual twins agree on the bounce terms aimed at the lamps, the Beckmann
+    variable's cap and where the asymmetric rule's uniforms start."""
+    text = OSL.read_text()
+    for name, value in (("LEE_AIMED_ORDERS", lee.AIMED_ORDERS),
+                        ("LEE_PARTNER_DIM", lee.PARTNER_DIM),
+                        ("LEE_BECKMANN_Y_MAX", lee.BECKMANN_Y_MAX)):
+        assert float(re.search(rf"#define {name} ([0-9.eE+-]+)", text).group(1)) == value, name
+
+
 def test_kmax_user_value_and_default():
     assert lee.kmax_for(1.0, "ggx", "symmetric", 0.0) == 158  # docs table
     assert lee.kmax_for(1.0, "ggx", "symmetric", 3.7) == 3
