@@ -216,7 +216,9 @@ def test_lee_native_and_residual_is_the_model(groove):
 
     bsdf = make_bsdf("lee_vgroove", {"roughness": 0.6, "groove": groove})
     records = [SUN, BALL]
-    n = 60_000
+    # Asymmetric grooves: every lamp check evaluates the partner-wall quadrature (43 s at 60,000
+    # samples); 20,000 keep the 5-sigma checks and the second moment's margin (28 against 10).
+    n = 60_000 if groove == "symmetric" else 20_000
     u = np.random.default_rng(23).random((n, lee.uniforms_needed(groove)))
     P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
     wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
