@@ -30,12 +30,14 @@ def enum_defines() -> str:
 
 def version_defines() -> str:
     """What the shaders need to know of the Blender they run in (addon/compat.py): whether
-    Cycles' conductor_bsdf is exact. Without bpy (numpy-only use): the current release's."""
+    Cycles' conductor_bsdf is exact, and whether Cycles inverts a back face's IOR itself.
+    Without bpy (numpy-only use): the current release's."""
     try:
-        from .compat import EXACT_CONDUCTOR_FRESNEL
+        from .compat import CYCLES_INVERTS_BACKFACE_IOR, EXACT_CONDUCTOR_FRESNEL
     except ImportError:
-        EXACT_CONDUCTOR_FRESNEL = True
-    return f"#define MFL_EXACT_CONDUCTOR {int(EXACT_CONDUCTOR_FRESNEL)}\n"
+        EXACT_CONDUCTOR_FRESNEL = CYCLES_INVERTS_BACKFACE_IOR = True
+    return (f"#define MFL_EXACT_CONDUCTOR {int(EXACT_CONDUCTOR_FRESNEL)}\n"
+            f"#define MFL_CYCLES_INVERTS_BACKFACE_IOR {int(CYCLES_INVERTS_BACKFACE_IOR)}\n")
 
 
 def _osl_value(param, value) -> str:

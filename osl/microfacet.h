@@ -93,6 +93,25 @@ normal refraction_closure_normal(vector wi, vector wo, float eta, output float e
     return (dot(wi, m) < 0.0) ? -m : m;
 }
 
+// The ratio to hand Cycles' refraction() and dielectric_bsdf() for a ratio eta seen from wi's
+// side. From Blender 5.3 Cycles inverts the ratio on a back face itself (the add-on says so:
+// MFL_CYCLES_INVERTS_BACKFACE_IOR, addon/compat.py), so it gets the inverse there, which it
+// inverts back. Handed 1/1.5 unchanged, a 5.3 back face refracted as 1.5 does: rough glass
+// seen from inside (bowls, the far side of balls) was several percent off.
+float cycles_ior(float eta)
+{
+    return (MFL_CYCLES_INVERTS_BACKFACE_IOR && backfacing()) ? 1.0 / eta : eta;
+}
+
+// A delta refraction lobe along wo (world space) for wi refracted with ratio eta: the normal
+// and ratio of refraction_closure_normal.
+closure color refraction_toward(vector wi, vector wo, float eta)
+{
+    float eta_closure;
+    normal m = refraction_closure_normal(wi, wo, eta, eta_closure);
+    return refraction(m, cycles_ior(eta_closure));
+}
+
 float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
 
 // ---------------------------------------------------------------------------------------
@@ -600,14 +619,14 @@ int has_native(int fresnel_type)
 // Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own
 // Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf with no
 // transmission for a dielectric (the same closed forms; tests/test_reference_split.py),
-// microfacet("ggx") with no Fresnel for none.
+// microfacet("ggx") with no Fresnel for none. `ior` is seen from wi's side (cycles_ior).
 closure color native_ggx(int fresnel_type, vector t, float ax, float ay, float ior, color n,
                          color k)
 {
     if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
         return conductor_bsdf(N, t, ax, ay, n, k, "ggx");
     if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
-        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, ior, "ggx");
+        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, cycles_ior(ior), "ggx");
     return microfacet("ggx", N, t, ax, ay, 0.0, 0);
 }
 
