@@ -130,8 +130,11 @@ def _sphere_node_group(radius: float):
 def add_spheres(scene, layout: GridLayout, materials: list, solid: bool = False):
     """One exact sphere per material, row-major; invisible to every secondary ray so that each
     sees only the environment (a single interface: a transmitted ray leaves unchanged). With
-    `solid`, spheres are visible to glossy and transmission rays: whole glass balls with entry,
-    internal bounces and exit (neighbours can then be seen too, alike in every render)."""
+    `solid`, spheres are visible to glossy and transmission rays, so neighbours can be seen
+    (alike in every render). Not closed balls: Cycles never hits a point-cloud sphere from
+    inside (measured, a refracted ray left a sphere whose back face would have emitted red
+    without meeting it), so a refracted ray still leaves unchanged; real back faces need a
+    mesh (addon/lab/glass_shapes.py)."""
     if len(materials) > layout.count:
         raise ValueError(f"{len(materials)} materials for a grid of {layout.count} spheres")
     group = _sphere_node_group(layout.radius)
@@ -155,7 +158,7 @@ def add_spheres(scene, layout: GridLayout, materials: list, solid: bool = False)
     return objects
 
 
-def _new_material(name: str):
+def new_material(name: str):
     material = compat.new_node_material(name)
     tree = material.node_tree
     for node in list(tree.nodes):
@@ -182,7 +185,7 @@ def add_quad(scene, name: str, corners, base_color, roughness=0.5, specular=0.5)
 
 def model_material(model_id: str, values: dict | None = None, name: str | None = None):
     """A material made of one Microfacet Lab node group."""
-    material, tree, output = _new_material(name or model_id)
+    material, tree, output = new_material(name or model_id)
     node = nodes.add_group_node(tree, model_id, values)
     tree.links.new(node.outputs["BSDF"], output.inputs["Surface"])
     return material
@@ -195,7 +198,7 @@ def linked_model_material(model_id: str, values: dict, name: str):
     from ..catalog import COLOR, ENUM, MODELS
 
     model = MODELS[model_id]
-    material, tree, output = _new_material(name)
+    material, tree, output = new_material(name)
     enums = {k: v for k, v in values.items() if model.param(k).kind == ENUM}
     group = nodes.add_group_node(tree, model_id, enums)
     for key, value in values.items():
@@ -220,7 +223,7 @@ def linked_model_material(model_id: str, values: dict, name: str):
 
 def osl_material(source: str, name: str):
     """A material made of a raw OSL script (used for Cycles' native closures in tests)."""
-    material, tree, output = _new_material(name)
+    material, tree, output = new_material(name)
     text = bpy.data.texts.new(name + ".osl")
     text.write(source)
     script = tree.nodes.new("ShaderNodeScript")
