@@ -11,7 +11,8 @@ below) while every grid test passed.
    and the first is held to the numpy reference by the sphere-grid tests. Their means agree
    within noise. At 40 degrees (near the critical angle, 41.8) the inverted ratio gave 0.291
    against 0.189 for smooth glass, 0.210 against 0.181 at roughness 0.6: a 1% difference
-   would show (power check).
+   would show (power check). Reflection-only models with a dielectric Fresnel (Walter
+   reflection, Lee) render a back face as the front face: their IOR does not flip.
 2. A closed glass ball and an open bowl (a smooth UV sphere and its lower half, so that every
    camera ray of the bowl meets a back face first) against a numpy trace of the model's twin
    through the exact sphere (addon/lab/glass_trace.py), per radial band, roughness 0.3 and
@@ -71,6 +72,23 @@ def test_a_back_face_is_the_front_face_seen_from_the_dense_side(model_id, roughn
     d, se, ok = _agree(a, b, z_crit)
     assert ok, f"back face {b.mean():.4f} against front face {a.mean():.4f} (se {se:.5f})"
     assert z_crit * se < 0.01 * a.mean(), f"no power: se {se:.5f} at {a.mean():.4f}"
+
+
+@pytest.mark.parametrize("model_id", ["walter_reflection", "lee_vgroove"])
+def test_an_opaque_dielectric_looks_the_same_from_both_sides(model_id):
+    """A reflection-only model keeps its IOR on either side (the surface is opaque), so a back
+    face renders as the front face. Walter reflection's native part (Cycles' dielectric_bsdf)
+    was handed 1.5 on a 5.3 back face, read it as 1/1.5 (total internal reflection) and
+    rendered 0.115 against 0.016."""
+    make = lambda: harness.model_material(  # noqa: E731
+        model_id, {"fresnel_type": "dielectric", "ior": IOR, "roughness": 0.5})
+    front, back = glass_shapes.render_plane_pair(make, make, math.radians(40.0), ENV,
+                                                 samples=512, seed=5)
+    a, b = front.mean(axis=-1), back.mean(axis=-1)
+    z_crit = grid.sidak_z(2)
+    d, se, ok = _agree(a, b, z_crit)
+    assert ok, f"back face {b.mean():.5f} against front face {a.mean():.5f} (se {se:.6f})"
+    assert z_crit * se < 0.01 * a.mean(), f"no power: se {se:.6f} at {a.mean():.5f}"
 
 
 SHAPE_SIZE_PX = 96
