@@ -4,7 +4,9 @@ residual's direct light").
 `hand_over(scene)` reads the lamps the scene renders (sun, point, spot, area, at the current
 frame) and the world's bright spots (an HDRI's sun, the Sky Texture's sun disc:
 addon/world_lights.py), writes their table into every Microfacet Lab text whose shader aims
-at lamps, and recompiles the Script nodes that use a text that changed. A render_pre handler
+at lamps, holds every other Microfacet Lab text to the add-on's source (a .blend compiled by
+another Blender or add-on version), and recompiles the Script nodes that use a text that
+changed. A render_pre handler
 runs it before every render: F12, `blender --background`, each frame of an animation (so animated lamps are
 handed over per frame); the harness and scripts/render_scene.py call it too.
 
@@ -87,11 +89,6 @@ def scene_records(scene, depsgraph=None) -> list:
     return records[:lamps.MAX_LAMPS]
 
 
-def lamp_models() -> list:
-    """The catalog models whose shaders aim at lamps (their OSL includes lamps.h)."""
-    return [m for m in MODELS.values() if shaders.uses_lamps(m)]
-
-
 def _script_nodes(text):
     trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None]
     trees += list(bpy.data.node_groups)
@@ -103,10 +100,13 @@ def _script_nodes(text):
 
 def hand_over(scene, depsgraph=None) -> list[str]:
     """Write `scene`'s lamps and world spots into the lamp-aiming texts that exist and recompile
-    their Script nodes; returns the names of the texts that changed (none when nothing did)."""
+    their Script nodes; returns the names of the texts that changed (none when nothing did).
+    Every model's text is held to the add-on's source, so a .blend compiled by another Blender
+    (the version facts of shaders.version_defines) or another add-on version is brought up to
+    date at render time too."""
     records = scene_records(scene, depsgraph)
     changed = []
-    for model in lamp_models():
+    for model in MODELS.values():
         text = bpy.data.texts.get(shaders.text_name(model))
         if text is None or text.as_string() == shaders.shader_source(model, records):
             continue

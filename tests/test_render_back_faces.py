@@ -91,6 +91,38 @@ def test_an_opaque_dielectric_looks_the_same_from_both_sides(model_id):
     assert z_crit * se < 0.01 * a.mean(), f"no power: se {se:.6f} at {a.mean():.5f}"
 
 
+def _compiled_for_the_other_side_of_5_3(material):
+    """The material's shader recompiled as the other side of Blender 5.3 would have compiled
+    it (the back-face fact inverted), as in a .blend saved by another Blender."""
+    from cycles import osl as cycles_osl
+
+    from addon import nodes
+
+    group = next(n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    script = group.nodes[nodes.SCRIPT_NODE_NAME]
+    source = script.script.as_string()
+    define = "#define MFL_CYCLES_INVERTS_BACKFACE_IOR "
+    value = source.split(define, 1)[1][0]
+    script.script.from_string(source.replace(define + value, define + str(1 - int(value))))
+    cycles_osl.update_script_node(script, lambda *args: None)
+    assert script.bytecode
+    return material
+
+
+def test_a_shader_compiled_by_another_blender_is_brought_up_to_date_at_render():
+    """The hand-over before each render holds every Microfacet Lab text to the add-on's source,
+    so glass compiled by a Blender on the other side of 5.3 (a .blend from another machine)
+    renders right where the add-on is installed. (Without the add-on the file keeps its own
+    compile: docs/cycles-osl.md.)"""
+    make = _lab_material("walter_glass", 0.0, 1.0 / IOR)
+    front, back = glass_shapes.render_plane_pair(
+        make, lambda: _compiled_for_the_other_side_of_5_3(
+            harness.model_material("walter_glass", _values("walter_glass", 0.0, IOR), "stale")),
+        math.radians(40.0), ENV, samples=512, seed=4)
+    d, se, ok = _agree(front.mean(axis=-1), back.mean(axis=-1), grid.sidak_z(1))
+    assert ok, f"back face against front face: {d:+.4f} (se {se:.5f})"
+
+
 SHAPE_SIZE_PX = 96
 SHAPE_SAMPLES = 128
 TRACE_PATHS = 200_000  # per band: a standard error near 0.15%
