@@ -6,7 +6,8 @@ refraction closure on a back face itself, the shaders inverted it too, and rough
 from inside refracted as if entering glass (Walter and Heitz 2016 glass 1-16% off in the bands
 below) while every grid test passed.
 
-1. Plane pairs (every supported Blender): the same model at the same tilt facing the camera
+1. Plane pairs (every supported Blender): a bare refraction closure pins the Blender fact
+   (addon/compat.py CYCLES_INVERTS_BACKFACE_IOR); the same model at the same tilt facing the camera
    with IOR 1/1.5 and facing away with IOR 1.5 is the same surface seen from the dense side,
    and the first is held to the numpy reference by the sphere-grid tests. Their means agree
    within noise. At 40 degrees (near the critical angle, 41.8) the inverted ratio gave 0.291
@@ -58,6 +59,34 @@ def _agree(a, b, z_crit):
     d = a.mean() - b.mean()
     se = math.hypot(a.std(ddof=1) / math.sqrt(a.size), b.std(ddof=1) / math.sqrt(b.size))
     return d, se, abs(d) <= z_crit * se
+
+
+def _refraction_probe(ratio):
+    source = ('#include "stdcycles.h"\nshader probe(output closure color BSDF = 0) {\n'
+              f'    BSDF = refraction(N, {ratio!r});\n}}')
+    return lambda: harness.osl_material(source, f"refraction {ratio:.4g}")
+
+
+def test_cycles_back_face_ratio_is_the_one_compat_names():
+    """The Blender fact itself, on a bare refraction closure (a delta lobe of weight 1 under
+    the gradient: every pixel sees one direction, no noise): leaving glass through a back face
+    needs the ratio 1/1.5, which Cycles reads as given before Blender 5.3 and inverted from
+    5.3 on (compat.CYCLES_INVERTS_BACKFACE_IOR). Fails, naming the fact, on a Blender that
+    changed it."""
+    from addon import compat
+
+    inverts = compat.CYCLES_INVERTS_BACKFACE_IOR
+    exiting = 1.0 / IOR
+    front, back = glass_shapes.render_plane_pair(
+        _refraction_probe(exiting), _refraction_probe(IOR if inverts else exiting),
+        math.radians(40.0), ENV, samples=4, seed=1)
+    _, naive = glass_shapes.render_plane_pair(
+        _refraction_probe(exiting), _refraction_probe(exiting if inverts else IOR),
+        math.radians(40.0), ENV, samples=4, seed=1)
+    assert np.abs(back - front).max() < 1e-5, (
+        f"Blender {bpy.app.version_string}: CYCLES_INVERTS_BACKFACE_IOR = {inverts} is wrong "
+        f"(back face {back.mean():.4f}, front face {front.mean():.4f})")
+    assert np.abs(naive - front).max() > 0.05  # the other ratio bends elsewhere: 0.276 vs 0.140
 
 
 @pytest.mark.parametrize("model_id", ["walter_glass", "heitz2016"])
