@@ -295,7 +295,7 @@ def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
 # --- menus reach the shader as the integer codes did ------------------------------------------
 
 RENDER = '''
-import os, re, sys, tempfile, time
+import ctypes, os, re, sys, tempfile, time
 root, mode, exr, blend = sys.argv[1:5]
 sys.path.insert(0, root)
 import bpy
@@ -328,20 +328,26 @@ def maker(i, model_id, pid, item):
         return material
     return make
 
+# The OSL runtime prints through C stdio, whose buffer must be flushed (fflush) before the file
+# descriptors go back: without it the tail of the listing went to the terminal, a varying share
+# of it (a CI run lost every "connected" line of one enum that way).
+libc = ctypes.CDLL(None)
 sys.stdout.flush(); sys.stderr.flush()
 saved = [os.dup(1), os.dup(2)]
-with tempfile.TemporaryFile() as tmp:
-    os.dup2(tmp.fileno(), 1); os.dup2(tmp.fileno(), 2)
+with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+    os.dup2(out.fileno(), 1); os.dup2(err.fileno(), 2)
     try:
         layout, image, seconds = harness.render_specs(
             None, grid.GRADIENT, 4, seed=5, cols=6, cell_px=20, path=exr,
             materials=[maker(i, *case) for i, case in enumerate(CASES)])
     finally:
-        sys.stdout.flush(); sys.stderr.flush()
+        sys.stdout.flush(); sys.stderr.flush(); libc.fflush(None)
         os.dup2(saved[0], 1); os.dup2(saved[1], 2)
         [os.close(fd) for fd in saved]
-    tmp.seek(0)
-    printed = tmp.read().decode(errors="replace")
+    printed = ""
+    for tmp in (out, err):
+        tmp.seek(0)
+        printed += tmp.read().decode(errors="replace")
 # The OSL runtime optimizer's statistics (OSL_OPTIONS=statistics:level=1), without timings and
 # without what is alive at the moment of printing ("current").
 stats = [re.sub(r",[^,]*current", "", line.strip()) for line in printed.splitlines()
