@@ -11,14 +11,16 @@ alone); `register()` imports the bpy-side modules.
 
 
 def register():
-    from . import handover, preset_ui, ui
+    from . import handover, notice, preset_ui, ui
     ui.register()
     preset_ui.register()
     handover.register()
+    notice.register()
 
 
 def unregister():
-    from . import handover, preset_ui, ui
+    from . import handover, notice, preset_ui, ui
+    notice.unregister()
     handover.unregister()
     preset_ui.unregister()
     ui.unregister()

@@ -25,6 +25,13 @@ EXACT_CONDUCTOR_FRESNEL = bpy.app.version >= (5, 0, 0)
 # 5.3.0 and as 1/1.5 before. By version: the OSL library's version cannot tell (5.2.3 ships OSL
 # 1.15.3 and does not invert, 5.3.0 1.15.6 does). osl/microfacet.h, refraction_toward.
 CYCLES_INVERTS_BACKFACE_IOR = bpy.app.version >= (5, 3, 0)
+# Blender 4.3 added the Metallic BSDF node (Cycles' conductor of complex IOR n + ik); before it
+# the nearest native metal is the Principled BSDF's (addon/fallback.py).
+METALLIC_BSDF = hasattr(bpy.types, "ShaderNodeBsdfMetallic")
+# Cycles' own anisotropic closures on a surface without a tangent (dPdu 0, as on point-cloud
+# spheres): black in 4.2 (Principled) and 5.0 (Metallic), a round-axis frame in 5.3 as our
+# shaders build (measured; 5.1 and 5.2 not). Before it the native branch drops the anisotropy.
+NATIVE_ANISOTROPY = bpy.app.version >= (5, 3, 0)
 
 
 def expose_bundled_modules() -> None:

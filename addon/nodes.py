@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import compat, shaders
+from . import compat, fallback, shaders
 from .catalog import COLOR, ENUM, FACTOR, MODELS, VECTOR, Model, Param
 
 GROUP_PREFIX = "Microfacet Lab: "
@@ -87,12 +87,13 @@ def _menu_switch(group, param: Param):
     return switch
 
 
-def build_group(model: Model, menus: bool | None = None):
+def build_group(model: Model, menus: bool | None = None, native: bool = True):
     """Build the model's node group from the catalog. A group of the same name is rebuilt in
     place, so group nodes already using it stay attached to it.
 
     `menus` (None: compat.MENU_SOCKETS) chooses menu or integer sockets for the enums; menus
-    need Blender 5.0+."""
+    need Blender 5.0+. `native` adds the branch rendered where OSL does not run
+    (addon/fallback.py); without it such renders are black (the lab compares the two)."""
     menus = compat.MENU_SOCKETS if menus is None else menus
     group = bpy.data.node_groups.get(group_name(model))
     if group is None:
@@ -112,7 +113,7 @@ def build_group(model: Model, menus: bool | None = None):
     script.name = script.label = SCRIPT_NODE_NAME
     group_in.location, script.location, group_out.location = (-500, 0), (0, 0), (300, 0)
     shaders.compile_script_node(script, model)
-    menu_row = 0
+    menu_row, sources = 0, {}
     for param in model.params:
         source = group_in.outputs[param.label]
         if param.kind == ENUM and menus:
@@ -122,7 +123,20 @@ def build_group(model: Model, menus: bool | None = None):
             group.links.new(source, switch.inputs["Menu"])
             source = switch.outputs[0]
         group.links.new(source, script.inputs[shaders.osl_input_name(param)])
-    group.links.new(script.outputs["BSDF"], group_out.inputs["BSDF"])
+        sources[param.id] = source
+    if native:
+        # OSL's closure where the shader runs, the native branch elsewhere (addon/fallback.py).
+        switch = group.nodes.new("ShaderNodeMixShader")
+        switch.name = switch.label = fallback.SWITCH_NODE_NAME
+        switch.location = (200, 0)
+        switch.inputs[0].default_value = 0.0
+        group.links.new(script.outputs[shaders.SWITCH_OUTPUT], switch.inputs[0])
+        group.links.new(fallback.build_native(group, model, sources), switch.inputs[1])
+        group.links.new(script.outputs["BSDF"], switch.inputs[2])
+        group_out.location = (400, 0)
+        group.links.new(switch.outputs[0], group_out.inputs["BSDF"])
+    else:
+        group.links.new(script.outputs["BSDF"], group_out.inputs["BSDF"])
     if menus:  # the menus know their items now
         for param in model.params:
             if param.kind == ENUM:
@@ -144,6 +158,8 @@ def _is_valid(group, model: Model) -> bool:
     changed is rebuilt; one with integer instead of menu sockets still works, see set_inputs)."""
     script = group.nodes.get(SCRIPT_NODE_NAME)
     if script is None or not script.bytecode or len(script.outputs) == 0:
+        return False
+    if fallback.SWITCH_NODE_NAME not in group.nodes:  # saved before the native branch
         return False
     inputs = [s.name for s in group.interface.items_tree
               if getattr(s, "in_out", None) == "INPUT"]

@@ -54,6 +54,11 @@ def osl_input_name(param) -> str:
     return "in_" + param.id
 
 
+# A float output that reads 1 wherever the shader runs and the Script node's default 0 where it
+# does not: the node group's switch to its native branch (addon/fallback.py).
+SWITCH_OUTPUT = "osl_runs"
+
+
 def parameter_declarations(model: Model) -> str:
     lines = []
     for p in model.params:
@@ -63,6 +68,7 @@ def parameter_declarations(model: Model) -> str:
         else:
             osl_type = "color" if p.kind == COLOR else "float"
             lines.append(f"    {osl_type} {osl_input_name(p)} = {_osl_value(p, p.default)},")
+    lines.append(f"    output float {SWITCH_OUTPUT} = 1.0,")
     return "\n".join(lines)
 
 

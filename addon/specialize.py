@@ -221,7 +221,8 @@ def material_lobes(material) -> set:
     return lobes
 
 
-def _lab_nodes(material):
+def lab_nodes(material):
+    """(tree, group node) of every Microfacet Lab group a material uses, nested groups too."""
     found = []
 
     def visit(tree, node):
@@ -235,7 +236,7 @@ def _lab_nodes(material):
 
 def linked_enum_inputs(material) -> list[str]:
     out = []
-    for tree, node in _lab_nodes(material):
+    for tree, node in lab_nodes(material):
         model = group_model(node.node_tree)
         if model is None:
             continue
@@ -275,7 +276,7 @@ def scan(scene) -> Report:
     report.materials = [m.name for m in mats]
     for mat in mats:
         report.lobes |= material_lobes(mat)
-        for _, node in _lab_nodes(mat):
+        for _, node in lab_nodes(mat):
             model = group_model(node.node_tree)
             key = model.id if model is not None else node.node_tree.name
             report.models.setdefault(key, [])
@@ -325,7 +326,7 @@ def prune_and_compile(scene, report: Report) -> None:
     scene_groups = set()
     for name in report.materials:
         mat = bpy.data.materials.get(name)
-        for _, node in _lab_nodes(mat) if mat is not None else []:
+        for _, node in lab_nodes(mat) if mat is not None else []:
             scene_groups.add(node.node_tree.name_full)
     compiled, up_to_date = set(), set()
     records = handover.scene_records(scene)

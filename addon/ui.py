@@ -6,8 +6,11 @@ import bpy
 from . import nodes
 from .catalog import MODELS
 
-# Cycles runs OSL on the CPU and on OptiX only; on these GPU backends a Script node renders black.
+# Cycles runs OSL on the CPU and on OptiX only; on these GPU backends a Script node does not run.
 GPU_WITHOUT_OSL = {"CUDA": "CUDA", "HIP": "HIP", "METAL": "Metal", "ONEAPI": "oneAPI"}
+# Where OSL does not run, every node group renders its native branch (addon/fallback.py).
+APPROXIMATION = ("Microfacet Lab materials show Cycles' nearest built-in BSDF, an approximation "
+                 "(exact only for Walter's models with Height-correlated masking)")
 
 
 def _compute_device_type():
@@ -17,22 +20,23 @@ def _compute_device_type():
 
 
 def osl_render_problem(scene, compute_device_type: str | None = None) -> str | None:
-    """Why Microfacet Lab nodes would render black with `scene`'s render settings, and how to fix
-    it, in one sentence; None when they render. The one check behind every warning (the Add and
-    Apply operators, the presets panel). `compute_device_type` defaults to Cycles' preference."""
+    """Why Microfacet Lab nodes would not render their exact models with `scene`'s render
+    settings, and how to fix it, in one sentence; None when they do. The one check behind every
+    warning (the Add and Apply operators, the presets panel, the render's own line).
+    `compute_device_type` defaults to Cycles' preference."""
     if scene.render.engine != "CYCLES":
-        return ("Microfacet Lab shaders are OSL and render only in Cycles: set Render Properties "
-                "> Render Engine to Cycles and turn on Open Shading Language")
+        return (f"The exact models are OSL and run only in Cycles, so here {APPROXIMATION}: set "
+                "Render Properties > Render Engine to Cycles and turn on Open Shading Language")
     cycles = scene.cycles
     if not cycles.shading_system:
-        return ("Open Shading Language is off, so Microfacet Lab shaders render black: turn on "
-                "Render Properties > Open Shading Language")
+        return (f"Open Shading Language is off, so {APPROXIMATION}: turn on "
+                "Render Properties > Open Shading Language for the exact models")
     if cycles.device == "GPU":
         backend = compute_device_type if compute_device_type is not None else _compute_device_type()
         if backend in GPU_WITHOUT_OSL:
-            return (f"Cycles cannot run OSL on {GPU_WITHOUT_OSL[backend]} GPUs, so Microfacet Lab "
-                    "shaders render black: switch Device to CPU or OptiX (Render Properties > "
-                    "Device; the GPU backend is in Preferences > System)")
+            return (f"Cycles cannot run OSL on {GPU_WITHOUT_OSL[backend]} GPUs, so "
+                    f"{APPROXIMATION}: for the exact models switch Device to CPU or OptiX (Render "
+                    "Properties > Device; the GPU backend is in Preferences > System)")
     return None
 
 

@@ -8,7 +8,7 @@
   the same statistics for both (the menu is a constant it folds, like an unlinked int), while
   the same code fed through a varying node chain changes them (the statistic sees the
   difference). A saved file with menus renders the same without the add-on.
-- Apply, Add and the presets panel say why the nodes would render black (OSL off, a GPU
+- Apply, Add and the presets panel say why the nodes render an approximation (OSL off, a GPU
   backend without OSL) and how to fix it.
 """
 from __future__ import annotations
@@ -288,7 +288,7 @@ def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
         result, printed = out[key]
         assert result == ["FINISHED"] and "Warning" not in printed, (key, printed)
     assert OSL_FIX in out["panel_osl_off"] and DEVICE_FIX in out["panel_cuda"]
-    assert "render black" in out["panel_osl_off"]
+    assert "nearest built-in BSDF, an approximation" in out["panel_osl_off"]
     assert "Open Shading" not in out["panel_cpu"] and DEVICE_FIX not in out["panel_cpu"]
 
 

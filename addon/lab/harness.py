@@ -286,9 +286,11 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
 
 def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, cols: int = 4,
                  cell_px: int = 32, path: str | None = None, materials: list | None = None,
-                 solid: bool = False, max_bounces: int = 4, light_sampling: bool = True):
+                 solid: bool = False, max_bounces: int = 4, light_sampling: bool = True,
+                 osl: bool = True):
     """Build and render a grid of SphereSpecs (or of ready-made `materials`, made by a callable
-    run after the scene is reset). Returns (layout, image, seconds)."""
+    run after the scene is reset). Returns (layout, image, seconds). `osl` False renders with
+    Open Shading Language off (the node groups' native branches, addon/fallback.py)."""
     count = len(specs if materials is None else materials)
     layout = GridLayout(rows=-(-count // cols), cols=cols, cell_px=cell_px)
     scene = new_scene()
@@ -298,5 +300,6 @@ def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, col
     else:
         mats = [None if make is None else make() for make in materials]
     build_grid_scene(layout, mats, env, samples, seed, max_bounces, solid, light_sampling)
+    scene.cycles.shading_system = osl
     image, seconds = render(scene, path)
     return layout, image, seconds

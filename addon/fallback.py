@@ -1,0 +1,246 @@
+"""The native branch of every node group: Cycles' nearest built-in BSDF, for where OSL does not run.
+
+Where OSL is unavailable (Cycles with OSL off, which is every CUDA, HIP, Metal and oneAPI GPU)
+Cycles creates no node for a Script node, and every input the Script node fed takes that
+input's own default value; EEVEE removes every link to or from a Script node. The group's last
+node is therefore a Mix Shader whose Factor (default 0) is fed by the Script node's float output
+`shaders.SWITCH_OUTPUT`, which reads 1 whenever the shader runs:
+
+    Factor 1 (OSL runs): the model's OSL closure, the native branch weighted 0 and dropped
+    Factor 0 (no OSL, EEVEE, a failed compile): the native branch built here
+
+The native branch is made of Blender's own shader nodes fed by the group's inputs, so it follows
+linked inputs (a roughness texture still works). Enum inputs arrive as their int codes (the menu
+switches' outputs); a Compare node turns a code into a 0/1 factor, and Mix nodes select between
+the candidates. With unlinked inputs every factor is a constant Cycles folds away before
+rendering, leaving one closure.
+
+What each model falls back to, and how near it comes, is in `NATIVE` below and docs/models.md
+("Without OSL").
+"""
+from __future__ import annotations
+
+from . import compat
+from .catalog import MODELS, Model
+
+SWITCH_NODE_NAME = "Microfacet Lab: OSL or native"
+NATIVE_FRAME_NAME = "Microfacet Lab: native branch"
+
+# What the artist is told the model becomes without OSL (panel, operators, the render's line).
+NATIVE = {
+    "cook_torrance": "Diffuse plus a Beckmann metal or glossy (Smith instead of V-cavity shadowing)",
+    "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
+                         "Beckmann with Height-correlated masking",
+    "walter_glass": "Glass BSDF: exact for Height-correlated masking",
+    "lee_vgroove": "Metallic or Glossy with Multiscatter GGX (Beckmann: single scattering)",
+    "heitz2016": "Metallic, Glass or Glossy with Multiscatter GGX (Beckmann: single scattering)",
+}
+
+
+class Branch:
+    """Builds nodes inside a group's frame, reading the group's inputs by catalog id."""
+
+    def __init__(self, group, model: Model, sources: dict):
+        self.group, self.model, self.sources = group, model, sources
+        self.frame = group.nodes.new("NodeFrame")
+        self.frame.name = self.frame.label = NATIVE_FRAME_NAME
+        self._count = 0
+
+    def node(self, kind: str, **props):
+        node = self.group.nodes.new(kind)
+        node.parent = self.frame
+        node.location = (-250 + 180 * (self._count % 4), -400 - 160 * (self._count // 4))
+        self._count += 1
+        for name, value in props.items():
+            setattr(node, name, value)
+        return node
+
+    def link(self, socket, target) -> None:
+        """Feed `target` (an input socket) from a socket, or set it to a constant."""
+        if hasattr(socket, "is_output"):
+            self.group.links.new(socket, target)
+        elif target.type == "RGBA" and len(socket) == 3:
+            target.default_value = (*socket, 1.0)
+        else:
+            target.default_value = socket
+
+    def src(self, pid: str):
+        return self.sources[pid]
+
+    def is_item(self, pid: str, item: str):
+        """1 where the enum `pid` is set to `item`, else 0 (its int code compared)."""
+        node = self.node("ShaderNodeMath", operation="COMPARE")
+        self.link(self.src(pid), node.inputs[0])
+        node.inputs[1].default_value = self.model.param(pid).index(item)
+        node.inputs[2].default_value = 0.5
+        return node.outputs[0]
+
+    def mix_shader(self, factor, a, b):
+        """a where factor is 0, b where it is 1; a or b None is no closure (scales the other)."""
+        node = self.node("ShaderNodeMixShader")
+        self.link(factor, node.inputs[0])
+        for sock, shader in zip(node.inputs[1:], (a, b)):
+            if shader is not None:
+                self.group.links.new(shader, sock)
+        return node.outputs[0]
+
+    def add_shader(self, a, b):
+        node = self.node("ShaderNodeAddShader")
+        self.group.links.new(a, node.inputs[0])
+        self.group.links.new(b, node.inputs[1])
+        return node.outputs[0]
+
+    def mix_vector(self, factor, a, b):
+        node = self.node("ShaderNodeMix", data_type="VECTOR")
+        self.link(factor, node.inputs["Factor"])
+        self.link(a, node.inputs["A_Vector"] if "A_Vector" in node.inputs else node.inputs[4])
+        self.link(b, node.inputs["B_Vector"] if "B_Vector" in node.inputs else node.inputs[5])
+        return _output(node, "VECTOR")
+
+    def gray(self, value):
+        """A vector (v, v, v) from a float socket."""
+        node = self.node("ShaderNodeCombineXYZ")
+        for sock in node.inputs:
+            self.link(value, sock)
+        return node.outputs[0]
+
+    def mean(self, color):
+        """The mean of a colour's channels (a scalar stand-in for a tint a closure cannot take)."""
+        node = self.node("ShaderNodeVectorMath", operation="DOT_PRODUCT")
+        self.link(color, node.inputs[0])
+        node.inputs[1].default_value = (1 / 3, 1 / 3, 1 / 3)
+        return node.outputs["Value"]
+
+    def bsdf(self, kind: str, distribution: str = "", props: dict | None = None, **inputs):
+        """A BSDF node with its properties set first (they choose which inputs exist)."""
+        props = dict(props or {}, **({"distribution": distribution} if distribution else {}))
+        node = self.node(kind, **props)
+        for name, value in inputs.items():
+            self.link(value, node.inputs[name])
+        return node.outputs[0]
+
+    def by_distribution(self, make, ggx: str = "GGX"):
+        """`make(distribution)` for GGX (as `ggx`, e.g. MULTI_GGX) and Beckmann, switched by the
+        model's Distribution (GGX alone where the model has none)."""
+        if not any(p.id == "distribution" for p in self.model.params):
+            return make(ggx)
+        return self.mix_shader(self.is_item("distribution", "beckmann"), make(ggx), make("BECKMANN"))
+
+
+def _output(node, socket_type: str):
+    return next(s for s in node.outputs if s.type == socket_type and s.enabled)
+
+
+def f0_conductor(b: Branch, n, k):
+    """Reflectance at normal incidence of a conductor, ((n-1)^2 + k^2) / ((n+1)^2 + k^2)
+    (Born & Wolf), per channel: the Principled metal's Base Color before Blender 4.3."""
+    def vmath(op, a, c):
+        node = b.node("ShaderNodeVectorMath", operation=op)
+        b.link(a, node.inputs[0])
+        b.link(c, node.inputs[1])
+        return node.outputs[0]
+
+    k2 = vmath("MULTIPLY", k, k)
+    minus = vmath("SUBTRACT", n, (1.0, 1.0, 1.0))
+    plus = vmath("ADD", n, (1.0, 1.0, 1.0))
+    num = vmath("ADD", vmath("MULTIPLY", minus, minus), k2)
+    den = vmath("ADD", vmath("MULTIPLY", plus, plus), k2)
+    return vmath("DIVIDE", num, den)
+
+
+def metal(b: Branch, distribution: str, n, k, roughness, anisotropy=0.0):
+    """Cycles' conductor (exact Fresnel of n + ik) where Blender has the Metallic BSDF (4.3+);
+    before it the Principled metal (GGX, F82 tint), coloured by its reflectance at normal
+    incidence: an approximation, also for Beckmann."""
+    if compat.METALLIC_BSDF:
+        return b.bsdf("ShaderNodeBsdfMetallic", distribution, {"fresnel_type": "PHYSICAL_CONDUCTOR"},
+                      IOR=n, Extinction=k,
+                      Roughness=roughness, Anisotropy=anisotropy)
+    principled = b.node("ShaderNodeBsdfPrincipled",
+                        distribution="GGX" if distribution == "BECKMANN" else distribution)
+    principled.inputs["Metallic"].default_value = 1.0
+    b.link(f0_conductor(b, n, k), principled.inputs["Base Color"])
+    b.link(roughness, principled.inputs["Roughness"])
+    return principled.outputs[0]
+
+
+def fresnel_metal(b: Branch, distribution: str, anisotropy=0.0):
+    """The model's Fresnel as a metal: Conductor reads N and K, Dielectric is a conductor with
+    n = IOR and k = 0 (the same Fresnel for real n). Fresnel None is not handled here."""
+    conductor = b.is_item("fresnel_type", "conductor")
+    n = b.mix_vector(conductor, b.gray(b.src("ior")), b.src("n"))
+    k = b.mix_vector(conductor, (0.0, 0.0, 0.0), b.src("k"))
+    return metal(b, distribution, n, k, b.src("roughness"), anisotropy)
+
+
+def tinted(b: Branch, shader):
+    """Scale a closure that takes no colour by the tint's mean."""
+    return b.mix_shader(b.mean(b.src("base_color")), None, shader)
+
+
+def reflection(b: Branch, distribution: str, anisotropy=0.0):
+    """A reflection with the model's Fresnel: a (tinted) metal, or for Fresnel None a Glossy
+    BSDF coloured by the tint."""
+    glossy = b.bsdf("ShaderNodeBsdfGlossy", distribution, Color=b.src("base_color"),
+                    Roughness=b.src("roughness"), Anisotropy=anisotropy)
+    metal_ = tinted(b, fresnel_metal(b, distribution, anisotropy))
+    if "none" not in b.model.param("fresnel_type").items:
+        return metal_
+    return b.mix_shader(b.is_item("fresnel_type", "none"), metal_, glossy)
+
+
+def glass(b: Branch, distribution: str):
+    return b.bsdf("ShaderNodeBsdfGlass", distribution, Color=b.src("base_color"),
+                  Roughness=b.src("roughness"), IOR=b.src("ior"))
+
+
+def cook_torrance(b: Branch):
+    # f = (1 - s) base / pi + s R_s (docs/models.md, sec. 1): the diffuse share and the
+    # specular share, a Beckmann reflection with Smith height-correlated masking.
+    share = b.node("ShaderNodeMath", operation="SUBTRACT")
+    share.inputs[0].default_value = 1.0
+    b.link(b.src("specular"), share.inputs[1])
+    diffuse_color = b.node("ShaderNodeVectorMath", operation="SCALE")
+    b.link(b.src("base_color"), diffuse_color.inputs[0])
+    b.link(share.outputs[0], diffuse_color.inputs["Scale"])
+    diffuse = b.bsdf("ShaderNodeBsdfDiffuse", Color=diffuse_color.outputs[0])
+    specular = b.mix_shader(b.src("specular"), None, fresnel_metal(b, "BECKMANN"))
+    return b.add_shader(diffuse, specular)
+
+
+def walter_reflection(b: Branch):
+    anisotropy = b.src("anisotropy") if compat.NATIVE_ANISOTROPY else 0.0
+    return b.by_distribution(lambda d: reflection(b, d, anisotropy))
+
+
+def walter_glass(b: Branch):
+    return b.by_distribution(lambda d: glass(b, d))
+
+
+def lee_vgroove(b: Branch):
+    # Cycles' multiscatter GGX keeps a rough metal's energy, as the grooves' bounces do.
+    return b.by_distribution(lambda d: reflection(b, d), ggx="MULTI_GGX")
+
+
+def heitz2016(b: Branch):
+    def make(d):
+        return b.mix_shader(b.is_item("fresnel_type", "dielectric"), reflection(b, d), glass(b, d))
+    return b.by_distribution(make, ggx="MULTI_GGX")
+
+
+BUILDERS = {"cook_torrance": cook_torrance, "walter_reflection": walter_reflection,
+            "walter_glass": walter_glass, "lee_vgroove": lee_vgroove, "heitz2016": heitz2016}
+assert set(BUILDERS) == set(MODELS) == set(NATIVE), "a model without a native branch"
+
+
+def build_native(group, model: Model, sources: dict):
+    """Build the model's native branch in `group` (any shader node tree) from `sources`: catalog
+    id -> the socket carrying that input, or a constant (enums as int codes). Returns its shader
+    output socket."""
+    return BUILDERS[model.id](Branch(group, model, sources))
+
+
+def constant_sources(model: Model, values: dict | None = None) -> dict:
+    """`sources` for build_native from catalog values (resolved and clamped by the catalog)."""
+    resolved = model.resolve(values)
+    return {p.id: p.index(resolved[p.id]) if p.items else resolved[p.id] for p in model.params}
