@@ -21,9 +21,8 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import compat, fallback, nodes, presets  # noqa: E402
-from addon.catalog import MODELS  # noqa: E402
-from addon.lab import grid, harness  # noqa: E402
+from addon import compat, nodes, presets  # noqa: E402
+from addon.lab import fallback_scenes, grid, harness  # noqa: E402
 
 PRESETS = presets.load_all()
 IDS = sorted(PRESETS)
@@ -31,46 +30,14 @@ COLS, CELL, SAMPLES, SEED = 7, 24, 16, 2
 
 
 def preset_material(pid):
-    preset = PRESETS[pid]
-    return lambda: harness.model_material(preset.model_id, preset.params, pid)
+    return fallback_scenes.preset_material(PRESETS[pid])
 
 
 def native_material(pid):
-    """The preset's native branch built straight into a material, from constants."""
-    preset = PRESETS[pid]
-
-    def make():
-        material, tree, output = harness.new_material(pid)
-        shader = fallback.build_native(tree, preset.model,
-                                       fallback.constant_sources(preset.model, preset.params))
-        tree.links.new(shader, output.inputs["Surface"])
-        return material
-    return make
+    return fallback_scenes.native_material(PRESETS[pid])
 
 
-PLAIN = "plain "  # + the group's name: the same group built without the native branch
-
-
-def without_branch(make):
-    """The material, its group node pointed at the model's group built without the native
-    branch (as before it), its inputs set again from the catalog values."""
-    def wrapped():
-        material = make()
-        for node in material.node_tree.nodes:
-            if node.bl_idname != "ShaderNodeGroup":
-                continue
-            model = next(m for m in MODELS.values() if nodes.group_name(m) == node.node_tree.name)
-            values = {p.id: node.inputs[p.label].default_value for p in model.params}
-            plain = bpy.data.node_groups.get(PLAIN + node.node_tree.name)
-            if plain is None:
-                node.node_tree.name = PLAIN + node.node_tree.name  # build_group makes a new one
-                plain = nodes.build_group(model, native=False)
-                plain.name, node.node_tree.name = node.node_tree.name, plain.name
-            node.node_tree = plain
-            for p in model.params:
-                node.inputs[p.label].default_value = values[p.id]
-        return material
-    return wrapped
+without_branch = fallback_scenes.without_branch
 
 
 def render(materials, osl=True, samples=SAMPLES, seed=SEED, light_sampling=True):

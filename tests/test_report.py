@@ -245,3 +245,23 @@ def test_smoke_comparisons_lobes_and_rendered_spheres(smoke):
     assert all(c["seconds_per_sample"] >= 0 for c in costs)
     for name in ("lobe_slices.png", "comparison_spheres.png"):
         assert (out / name).stat().st_size > 5_000, name
+
+
+@pytest.mark.render
+def test_smoke_fallback_section_measures_every_preset(smoke):
+    """The native-branch section: a row per preset with finite albedo errors over the bands
+    of mu, the look's error, the picture, and the OSL-on cost of both variants."""
+    from addon import presets
+
+    out, _ = smoke
+    page = (out / "report.md").read_text()
+    assert "## Without OSL: the native branch against the exact model" in page
+    data = json.loads((out / "results.json").read_text())["fallback"]
+    assert [e["preset"] for e in data["presets"]] == sorted(presets.load_all())
+    for e in data["presets"]:
+        assert len(e["albedo"]) >= 2 and len(e["gradient"]) == 3, e
+        assert np.isfinite([b["error"] + b["noise"] for b in e["albedo"]]).all(), e
+        assert re.search(rf"\| {e['preset']} \| .+ \| {NUMBER}% \| {NUMBER}% \| {NUMBER}% \|", page)
+    assert data["cost"]["with"] and data["cost"]["without"]
+    assert (out / "fallback.png").stat().st_size > 1000
+    assert re.search(rf"ratio {NUMBER}\.", page)

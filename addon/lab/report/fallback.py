@@ -1,0 +1,123 @@
+"""Section "fallback": every preset's native branch (what renders without OSL: addon/fallback.py)
+against the exact model it stands in for, and what the branch costs where OSL runs.
+
+- Albedo over incidence: both rendered under the white furnace; per band of mu = n.wi the
+  relative error of the fallback's mean against the exact model's, with the noise of that
+  difference (the scatter of the per-pixel differences of the two renders over sqrt(n)).
+- The look: both under the gradient world, the relative error of each sphere's mean, and a row
+  of pictures (exact, fallback, 4 x |difference|).
+- Cost with OSL on: the presets' grid rendered with and without the branch, alternating, the
+  wall clock of the render call (scene sync and OSL JIT included).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ... import fallback, presets
+from .. import grid
+from .plotting import to_display
+
+
+def _settings(mode):
+    # samples, cell pixels, cost repeats
+    return {"full": (256, 48, 3), "quick": (64, 32, 2)}.get(mode, (8, 16, 1))
+
+
+def _render(materials, env, samples, cell, seed, osl, cols):
+    from .. import harness
+
+    layout, image, seconds = harness.render_specs(None, env, samples, seed=seed, cols=cols,
+                                                  cell_px=cell, materials=materials, osl=osl)
+    return layout, image[..., :3], seconds
+
+
+def _band_errors(layout, fallback_image, exact_image):
+    """Per sphere: [(band, relative error (3,), its standard error (3,))]."""
+    out = {}
+    for s in grid.band_stats(layout, fallback_image, exact_image, sides=False):
+        ref = np.maximum(np.abs(s.reference), 1e-6)
+        out.setdefault(s.sphere, []).append((s.band, s.bias / ref, s.stderr / ref))
+    return out
+
+
+def _sphere_means(layout, image):
+    index, _, _ = layout.pixel_geometry()
+    return np.array([image[index == i].mean(axis=0) for i in range(layout.count)])
+
+
+def compute(cfg, rows, tables, progress, notes, out) -> dict:
+    from ..fallback_scenes import preset_material, without_branch
+    from ...compat import write_png
+
+    samples, cell, repeats = _settings(cfg.mode)
+    chosen = [presets.load_all()[k] for k in sorted(presets.load_all())]
+    cols = 7
+    made = [preset_material(p) for p in chosen]
+    entries = [{"preset": p.id, "model": p.model_id, "native": fallback.NATIVE[p.model_id]}
+               for p in chosen]
+    images = {}
+    for env_key, env in (("white", grid.WHITE), ("gradient", grid.GRADIENT)):
+        layout, exact, _ = _render(made, env, samples, cell, 1, True, cols)
+        _, approx, _ = _render(made, env, samples, cell, 2, False, cols)
+        images[env_key] = (exact, approx)
+        if env_key == "white":
+            for i, bands in _band_errors(layout, approx, exact).items():
+                entries[i]["albedo"] = [{"mu": list(b), "error": e.tolist(), "noise": n.tolist()}
+                                        for b, e, n in bands]
+        else:
+            e, a = _sphere_means(layout, exact), _sphere_means(layout, approx)
+            for i, entry in enumerate(entries):
+                entry["gradient"] = ((a[i] - e[i]) / np.maximum(e[i], 1e-6)).tolist()
+        progress(f"fallback: {env_key} furnace and look rendered ({samples} samples)")
+    exact, approx = images["gradient"]
+    write_png(out / "fallback.png", np.concatenate(
+        [to_display(exact), to_display(approx), to_display(4.0 * np.abs(approx - exact))], axis=0))
+
+    seconds = {True: [], False: []}
+    for _ in range(repeats):
+        for branch in (True, False):
+            mats = made if branch else [without_branch(m) for m in made]
+            seconds[branch].append(_render(mats, grid.GRADIENT, samples, cell, 3, True, cols)[2])
+    cost = {"with": seconds[True], "without": seconds[False], "samples": samples,
+            "spheres": len(chosen)}
+    progress(f"fallback: OSL-on cost with / without the branch "
+             f"{np.median(seconds[True]) / np.median(seconds[False]):.3f}")
+    return {"fallback": {"presets": entries, "cost": cost, "samples": samples, "cell_px": cell}}
+
+
+def _worst(entry):
+    errors = np.array([b["error"] for b in entry.get("albedo", [])])
+    if errors.size == 0:
+        return float("nan"), float("nan")
+    return float(np.abs(errors).max()), float(np.abs(errors).mean())
+
+
+def page(cfg, rows, res) -> list:
+    data = res.get("fallback")
+    if not data:
+        return []
+    cost = data["cost"]
+    ratio = np.median(cost["with"]) / np.median(cost["without"])
+    lines = ["## Without OSL: the native branch against the exact model", "",
+             f"Every preset rendered exact (OSL) and as its native branch (OSL off), "
+             f"{data['samples']} samples, spheres of {data['cell_px']} px. Albedo: the white "
+             "furnace, the relative error of the branch per band of mu = n.wi (worst and mean "
+             "over bands and channels; noise: the standard error of that difference, largest "
+             "band). Look: the gradient world, the relative error of the sphere's mean per "
+             "channel.", "",
+             "| preset | model | native branch | albedo error worst | mean | noise | look (R, G, B) |",
+             "|---|---|---|---|---|---|---|"]
+    for e in data["presets"]:
+        worst, mean = _worst(e)
+        noise = max((max(b["noise"]) for b in e.get("albedo", [])), default=float("nan"))
+        look = ", ".join(f"{100 * v:+.1f}%" for v in e.get("gradient", []))
+        lines.append(f"| {e['preset']} | {e['model']} | {e['native']} | {100 * worst:.1f}% | "
+                     f"{100 * mean:.1f}% | {100 * noise:.1f}% | {look} |")
+    lines += ["", "![exact, native branch, 4 x difference](fallback.png)", "",
+              f"Cost where OSL runs: the {cost['spheres']} presets' grid, {cost['samples']} "
+              f"samples, render call with the branch {np.median(cost['with']):.2f} s, without "
+              f"{np.median(cost['without']):.2f} s (medians of {len(cost['with'])} alternating "
+              f"runs): ratio {ratio:.3f}.", ""]
+    return lines
