@@ -30,7 +30,7 @@ NATIVE_FRAME_NAME = "Microfacet Lab: native branch"
 NATIVE = {
     "cook_torrance": "Diffuse plus a Beckmann metal or glossy (Smith instead of V-cavity shadowing)",
     "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
-                         "Beckmann with Height-correlated masking",
+                         "Beckmann with Height-correlated masking (metals from Blender 5.0)",
     "walter_glass": "Glass BSDF: exact for Height-correlated masking",
     "lee_vgroove": "Metallic or Glossy with Multiscatter GGX (Beckmann: single scattering)",
     "heitz2016": "Metallic, Glass or Glossy with Multiscatter GGX (Beckmann: single scattering)",
