@@ -1,6 +1,7 @@
 """Portability (the render-farm case): a .blend made with the add-on renders the same in a fresh
 bpy process that never imports the add-on, because the OSL bytecode travels in the file with the
-INTERNAL Script nodes.
+INTERNAL Script nodes; with OSL off (a GPU render farm) the node groups' native branches, saved
+in the file too, render the same way.
 
 Measured: the fresh process reproduces the image exactly with the same seed (max |diff| 0 on
 this machine; docs/cycles-osl.md notes ~3e-7 between thread counts), so the test asserts agreement
@@ -25,12 +26,13 @@ PRESETS = ("gold", "red_plastic", "aluminium_brushed")
 
 CHILD = '''
 import sys
-blend, exr = sys.argv[1], sys.argv[2]
+blend, exr, osl = sys.argv[1], sys.argv[2], sys.argv[3] == "osl"
 import bpy
 if hasattr(bpy.utils, "expose_bundled_modules"):
     bpy.utils.expose_bundled_modules()  # bpy's own OpenImageIO, not the add-on
 bpy.ops.wm.open_mainfile(filepath=blend)
 scene = bpy.context.scene
+scene.cycles.shading_system = osl
 scripts = [(g.name, n.mode, len(n.bytecode), n.script.name if n.script else None)
            for g in bpy.data.node_groups if g.bl_idname == "ShaderNodeTree"
            for n in g.nodes if n.bl_idname == "ShaderNodeScript"]
@@ -45,21 +47,25 @@ report({"scripts": scripts, "foreign_modules": foreign, "repo_importable": path_
 '''
 
 
-def test_saved_material_renders_identically_without_the_addon(tmp_path):
+@pytest.mark.parametrize("osl", [True, False], ids=["osl", "no_osl"])
+def test_saved_material_renders_identically_without_the_addon(tmp_path, osl):
+    """With OSL the shaders run from the bytecode in the file; without it (a GPU farm) the
+    groups' native branches render, also saved in the file (addon/fallback.py)."""
     from addon import compat
 
     specs = [grid.SphereSpec(presets.find(p).model_id, presets.find(p).params, p) for p in PRESETS]
-    layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 16, seed=7, cols=3, cell_px=32)
+    layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 16, seed=7, cols=3, cell_px=32,
+                                            osl=osl)
     blend = tmp_path / "farm.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=False)
 
     farm = tmp_path / "farm"
     farm.mkdir()
     exr = farm / "farm.exr"
-    out = run_bpy_script(CHILD, farm, str(blend), str(exr))
+    out = run_bpy_script(CHILD, farm, str(blend), str(exr), "osl" if osl else "no_osl")
     log = out.pop("_log")
     assert out["foreign_modules"] == [] and not out["repo_importable"], log
-    assert out["engine"] == "CYCLES" and out["osl"], log
+    assert out["engine"] == "CYCLES" and out["osl"] == osl, log
     assert len(out["scripts"]) == 2 and all(mode == "INTERNAL" and size > 1000
                                             for _, mode, size, _ in out["scripts"]), out["scripts"]
 
@@ -71,6 +77,6 @@ def test_saved_material_renders_identically_without_the_addon(tmp_path):
     print(f"\n[portability] max |diff| {np.abs(d).max():.2e}, mean {mean} +- {stderr}")
     assert (np.abs(mean) <= 4 * stderr + 1e-6).all(), (mean, stderr)
     assert np.abs(d).max() < 1e-4
-    # The spheres are not black: the shaders really ran in the fresh process.
+    # The spheres are not black: the shaders (or the native branches) really ran there.
     for i in range(len(PRESETS)):
         assert farm_image[index == i][:, :3].mean() > 0.05
