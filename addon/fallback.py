@@ -15,8 +15,9 @@ switches' outputs); a Compare node turns a code into a 0/1 factor, and Mix nodes
 the candidates. With unlinked inputs every factor is a constant Cycles folds away before
 rendering, leaving one closure.
 
-What each model falls back to, and how near it comes, is in `NATIVE` below and docs/models.md
-("Without OSL").
+What each model falls back to is `NATIVE` below; why this works and what is exact, by Blender
+version, is in docs/cycles-osl.md ("Where OSL does not run"); how near each preset comes is
+measured by `make report` (section "fallback").
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ NATIVE_FRAME_NAME = "Microfacet Lab: native branch"
 
 # What the artist is told the model becomes without OSL (panel, operators, the render's line).
 NATIVE = {
-    "cook_torrance": "Diffuse plus a Beckmann metal or glossy (Smith instead of V-cavity shadowing)",
+    "cook_torrance": "Diffuse plus a Beckmann metal (Smith instead of V-cavity shadowing)",
     "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
                          "Beckmann with Height-correlated masking (metals from Blender 5.0)",
     "walter_glass": "Glass BSDF: exact for Height-correlated masking",
