@@ -18,10 +18,16 @@ below) while every grid test passed.
    camera ray of the bowl meets a back face first) against a numpy trace of the model's twin
    through the exact sphere (addon/lab/glass_trace.py), per radial band, roughness 0.3 and
    0.6: Cycles' own Glass BSDF (the anchor of the trace and of the tessellation), Walter
-   glass and Heitz 2016 glass, both Stochastic (inside glass their Native + Residual is the
-   same estimator: the split applies entering the dense side only). Noise: the render's from
-   two seeds, pixel by pixel; the trace's from its paths. Power: a 1% bias of every band
-   would show.
+   glass and Heitz 2016 glass, both Stochastic, and on the ball both with Native + Residual
+   too (its front faces enter the dense side, where the first order goes to Cycles' closure;
+   inside glass the menu changes nothing, so the bowl would repeat the Stochastic case).
+   Lee's V-grooves with a dielectric Fresnel in the bowl (opaque: every camera ray reflects
+   off back faces until it leaves through the top), at IOR 4 so that the bowl is bright enough
+   for the power below; read as 1/4 on a back face it would be 2.4 to 17 times brighter
+   per band (the twin's trace).
+   Noise: the render's from two seeds, pixel by pixel; the trace's from its paths. Power: a
+   1% bias of every band would show. Before the fix (the ratio inverted twice on 5.3) the bands
+   were 1.6-14.5% dark for Heitz 2016 glass and 1.7-16.6% for Walter glass (z down to -90).
 What this catches: an IOR inverted twice or not at all on back faces, a wrong refraction
 direction or Fresnel from inside, total internal reflection mishandled, a walk that goes wrong
 where it starts below the interface.
@@ -42,16 +48,16 @@ IOR = 1.5
 ENV = grid.GRADIENT
 
 
-def _values(model_id, roughness, ior):
-    values = {"ior": ior, "roughness": roughness, "estimator": "stochastic"}
-    if model_id == "heitz2016":
+def _values(model_id, roughness, ior, estimator="stochastic"):
+    values = {"ior": ior, "roughness": roughness, "estimator": estimator}
+    if model_id in ("heitz2016", "lee_vgroove"):
         values["fresnel_type"] = "dielectric"
     return values
 
 
-def _lab_material(model_id, roughness, ior):
-    return lambda: harness.model_material(model_id, _values(model_id, roughness, ior),
-                                          f"{model_id} {roughness} {ior:.4g}")
+def _lab_material(model_id, roughness, ior, estimator="stochastic"):
+    return lambda: harness.model_material(model_id, _values(model_id, roughness, ior, estimator),
+                                          f"{model_id} {roughness} {ior:.4g} {estimator}")
 
 
 def _agree(a, b, z_crit):
@@ -154,33 +160,52 @@ def test_a_shader_compiled_by_another_blender_is_brought_up_to_date_at_render():
 
 SHAPE_SIZE_PX = 96
 SHAPE_SAMPLES = 128
-TRACE_PATHS = 200_000  # per band: a standard error near 0.15%
+TRACE_PATHS = 200_000  # per band: a standard error near 0.15% for glass
+LEE_IOR = 4.0
+TRACE_PATHS_LEE = 400_000  # a standard error near 0.15% at the bowl's edge
 
 
 @functools.lru_cache(maxsize=None)
 def _trace(shape, twin, roughness):
     alpha = roughness * roughness
-    sampler = (glass_trace.heitz_sampler if twin == "heitz2016" else glass_trace.walter_sampler)
     _, pixels = glass_trace.band_pixels(glass_trace.layout(SHAPE_SIZE_PX))
+    if twin == "lee_vgroove":
+        sampler = glass_trace.reflector_sampler(twin, _values(twin, roughness, LEE_IOR))
+        return glass_trace.band_means(shape, sampler, pixels, ENV, TRACE_PATHS_LEE, seed=7)
+    sampler = (glass_trace.heitz_sampler if twin == "heitz2016" else glass_trace.walter_sampler)
     return glass_trace.band_means(shape, sampler(alpha, IOR), pixels, ENV, TRACE_PATHS, seed=7)
 
 
-def _shape_material(model_id, roughness):
+def _ior(model_id):
+    return LEE_IOR if model_id == "lee_vgroove" else IOR
+
+
+def _shape_material(model_id, roughness, estimator):
     if model_id == "cycles_glass":
         return lambda: glass_shapes.glass_node_material(roughness, IOR)
-    return _lab_material(model_id, roughness, IOR)
+    return _lab_material(model_id, roughness, _ior(model_id), estimator)
 
 
-@pytest.mark.parametrize("model_id", ["cycles_glass", "walter_glass", "heitz2016"])
+# (shape, model, Light Sampling): both estimators on the ball, whose front faces enter the dense
+# side, where Native + Residual splits the first order off to Cycles; on the bowl every camera
+# ray starts inside the glass, where both models run their Stochastic estimator whatever the menu.
+SHAPE_CASES = [(shape, model_id, None if model_id == "cycles_glass" else "stochastic")
+               for shape in glass_trace.SHAPES
+               for model_id in ("cycles_glass", "walter_glass", "heitz2016")] + [
+    ("ball", model_id, "light_sampled") for model_id in ("walter_glass", "heitz2016")] + [
+    ("bowl", "lee_vgroove", "stochastic")]
+
+
 @pytest.mark.parametrize("roughness", [0.3, 0.6])
-@pytest.mark.parametrize("shape", glass_trace.SHAPES)
-def test_glass_ball_and_bowl_match_the_twin_traced_through_them(shape, roughness, model_id):
-    images = [glass_shapes.render_shape(shape, _shape_material(model_id, roughness), ENV,
-                                        SHAPE_SIZE_PX, SHAPE_SAMPLES, seed)[..., :3].mean(-1)
-              for seed in (1, 2)]
+@pytest.mark.parametrize("shape, model_id, estimator", SHAPE_CASES)
+def test_glass_ball_and_bowl_match_the_twin_traced_through_them(shape, model_id, estimator,
+                                                                 roughness):
+    make = _shape_material(model_id, roughness, estimator)
+    images = [glass_shapes.render_shape(shape, make, ENV, SHAPE_SIZE_PX, SHAPE_SAMPLES,
+                                        seed)[..., :3].mean(-1) for seed in (1, 2)]
     assert all(np.isfinite(image).all() for image in images)
     masks, _ = glass_trace.band_pixels(glass_trace.layout(SHAPE_SIZE_PX))
-    twin = "heitz2016" if model_id == "heitz2016" else "walter_glass"
+    twin = "walter_glass" if model_id == "cycles_glass" else model_id
     reference, reference_se = (x.mean(axis=-1) for x in _trace(shape, twin, roughness))
     z_crit = grid.sidak_z(len(masks))
     bad = []
@@ -190,7 +215,7 @@ def test_glass_ball_and_bowl_match_the_twin_traced_through_them(shape, roughness
         # The seeds' pixel-by-pixel difference holds the noise alone (not the band's shading).
         se_render = (a - b).std(ddof=1) / (2.0 * math.sqrt(a.size))
         se = math.hypot(se_render, ref_se)
-        print(f"{shape} {roughness} {model_id} {name}: {mean:.4f} against {ref:.4f}, "
+        print(f"{shape} {roughness} {model_id} {estimator} {name}: {mean:.4f} against {ref:.4f}, "
               f"se {se:.5f} (render {se_render:.5f}), z {(mean - ref) / se:+.1f}")
         assert z_crit * se < 0.01 * ref, f"{name}: no power, se {se:.5f} at {ref:.4f}"
         if abs(mean - ref) > z_crit * se:

@@ -17,13 +17,14 @@ measures the difference on Cycles' own glass).
 `sampler(eta)` gives, for the relative index eta = n_t / n_i seen from wi's side, a function
 `(wi (N, 3) local, rng) -> (wo (N, 3) local, weight (N, 3))` drawing one scattering event of
 the model, wo.z < 0 for transmission, the sample weight f |cos| / pdf (see `walter_sampler`,
-`heitz_sampler`).
+`heitz_sampler`; `reflector_sampler` for an opaque model).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from .grid import Environment, GridLayout
+from .reference.bsdf import make_bsdf
 from .reference.glass import MicrofacetGlass
 from .reference.heitz2016 import HeitzDielectric
 from .reference.microfacet import Microfacet
@@ -56,6 +57,18 @@ def heitz_sampler(alpha: float, ior: float, max_order: int = 100):
             return s.wo, s.weight
         return draw
     return _by_side(sample, ior)
+
+
+def reflector_sampler(model_id: str, values: dict):
+    """An opaque catalog model (reflection only, e.g. Lee's V-grooves with a dielectric
+    Fresnel) through its numpy BSDF (make_bsdf): the same on either side, since its IOR does not
+    flip on a back face (the surface has no inside)."""
+    bsdf = make_bsdf(model_id, values)
+    dims = 6 if getattr(bsdf, "groove", "symmetric") == "asymmetric" else 3
+
+    def draw(wi, rng):
+        return bsdf.sample(wi, rng.random((len(wi), dims)))[:2]
+    return lambda eta_is_front: draw
 
 
 def _by_side(make, ior):
