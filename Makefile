@@ -12,25 +12,17 @@ SHELL := /bin/bash
 VENV_SH := scripts/venv.sh
 PY = $$($(VENV_SH) requirements.txt)
 COMPAT ?= 4.2 4.5 5.0
-# The compatibility suite: install the zip, build every node group and check it compiled, apply
-# and render every preset, a white-furnace sphere against the numpy reference, the CLI; the
-# node sockets, preset operator, scene specialization, a saved .blend rendered without the
-# add-on, and the lamps: their hand-over, and the residual aimed at them and the lamp controls
-# against numpy under a large, a 4-degree and a 0.5-degree sun (Cycles' closure cutoff); glass
-# seen from inside on plane pairs (Cycles' back-face IOR changed in 5.3); the native branches
-# rendered without OSL (4.2 has no Metallic BSDF node). In the full suite only
-# (the same maths on every version, and test time): the point and area lamps, Lee under the
-# suns, the glass ball and bowl against the traced twin, and the report's smoke run (the report
-# is lab tooling, run on the pinned release).
-COMPAT_TESTS := tests/test_package.py tests/test_versions.py tests/test_cli.py \
-	tests/test_harness.py tests/test_nodes.py tests/test_presets.py tests/test_specialize.py \
-	tests/test_portability.py tests/test_handover.py tests/test_world_handover.py \
-	tests/test_render_lights.py tests/test_render_back_faces.py tests/test_render_fallback.py \
-	--deselect tests/test_render_back_faces.py::test_glass_ball_and_bowl_match_the_twin_traced_through_them \
-	--deselect tests/test_render_lights.py::test_lee_matches_the_sun_reference \
-	--deselect tests/test_render_lights.py::test_lee_native_and_residual_matches_the_small_sun_reference \
-	--deselect tests/test_render_lights.py::test_aimed_residual_matches_the_point_lamp_reference \
-	--deselect tests/test_render_lights.py::test_aimed_residual_matches_the_area_lamp_reference
+# The compatibility suite (tests marked `compat`, less those marked `release_only`; see
+# tests/conftest.py): install the zip, build every node group and check it compiled, apply and
+# render every preset, a white-furnace sphere against the numpy reference, the CLI; the node
+# sockets, preset operator, scene specialization, a saved .blend rendered without the add-on,
+# and the lamps: their hand-over, and the residual aimed at them and the lamp controls against
+# numpy under a large, a 4-degree and a 0.5-degree sun (Cycles' closure cutoff); glass seen from
+# inside on plane pairs (Cycles' back-face IOR changed in 5.3); the native branches rendered
+# without OSL (4.2 has no Metallic BSDF node). On the pinned release only (the same maths on
+# every version, and test time): the point and area lamps, Lee under the suns, the glass ball
+# and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
+COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace clean
 
@@ -40,18 +32,20 @@ venv:
 venvs: venv
 	@for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt >/dev/null; done
 
-test: test-full test-compat
+# Two lanes side by side on 2 cores (scripts/test_lanes.sh): the render tests on the pinned
+# release; beside them the tests that do not render, then the compatibility suites.
+test: venvs
+	scripts/test_lanes.sh $(PY) --compat $(COMPAT_PYS)
 
-# The render tests and the rest run side by side (scripts/test_full.sh): about 5 minutes less.
+# The full suite on the pinned release alone (both lanes, no compatibility suite).
 test-full: venv
-	@py=$(PY); echo "== full suite on Blender $$($$py -c 'import bpy; print(bpy.app.version_string)')"
-	scripts/test_full.sh $(PY)
+	scripts/test_lanes.sh $(PY)
 
 test-compat: venvs
 	@for v in $(COMPAT); do \
 	  py=$$($(VENV_SH) tests/compat/requirements-$$v.txt); \
 	  echo "== compatibility suite on Blender $$($$py -c 'import bpy; print(bpy.app.version_string)')"; \
-	  $$py -m pytest -q -ra -p no:cacheprovider $(COMPAT_TESTS); \
+	  $$py -m pytest -q -ra -p no:cacheprovider -m "compat and not release_only" tests; \
 	done
 
 test-fast: venv

@@ -7,7 +7,7 @@ filter and the world's direction convention, independently of every microfacet f
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 

@@ -27,6 +27,8 @@ from addon import compat, nodes, ui  # noqa: E402
 from addon.catalog import COLOR, ENUM, ENUMS, FACTOR, MODELS, VECTOR  # noqa: E402
 from addon.lab import harness  # noqa: E402
 
+pytestmark = pytest.mark.compat
+
 ROOT = Path(__file__).resolve().parent.parent
 
 LABELS = {

@@ -22,6 +22,8 @@ import pytest
 from addon.catalog import MODELS
 from bpy_helpers import run_bpy_script
 
+pytestmark = pytest.mark.compat
+
 ROOT = Path(__file__).resolve().parent.parent
 EXT_ID = "microfacet_lab"
 MODULE = f"bl_ext.user_default.{EXT_ID}"

@@ -14,7 +14,7 @@ import pytest
 
 from bpy_helpers import run_bpy_script
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 

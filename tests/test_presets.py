@@ -15,6 +15,8 @@ from addon.catalog import MODELS
 from addon.presets import PresetError
 from bpy_helpers import run_bpy_script
 
+pytestmark = pytest.mark.compat
+
 ROOT = Path(__file__).resolve().parent.parent
 ALL = presets.load_all()
 

@@ -38,7 +38,7 @@ import math
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
@@ -196,6 +196,7 @@ SHAPE_CASES = [(shape, model_id, None if model_id == "cycles_glass" else "stocha
     ("bowl", "lee_vgroove", "stochastic")]
 
 
+@pytest.mark.release_only
 @pytest.mark.parametrize("roughness", [0.3, 0.6])
 @pytest.mark.parametrize("shape, model_id, estimator", SHAPE_CASES)
 def test_glass_ball_and_bowl_match_the_twin_traced_through_them(shape, model_id, estimator,

@@ -17,7 +17,7 @@ nothing changes.
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
@@ -285,6 +285,7 @@ def point_render():
         layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, n), (16, 32))
 
 
+@pytest.mark.release_only
 def test_aimed_residual_matches_the_point_lamp_reference(point_render):
     layout, image, reference, quad_err = point_render
     _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)
@@ -323,6 +324,7 @@ def area_render():
         layout, POINT_ROW, AREA_CENTRE, u, v, radiance, n), (24, 24))
 
 
+@pytest.mark.release_only
 def test_aimed_residual_matches_the_area_lamp_reference(area_render):
     layout, image, reference, quad_err = area_render
     _assert_bands_match(layout, POINT_ROW, image, reference, quad_err, power=0.05)
@@ -349,6 +351,7 @@ def lee_sun_render():
         LEE_LAYOUT, lit, radiance, half, n), (16, 32))
 
 
+@pytest.mark.release_only
 def test_lee_matches_the_sun_reference(lee_sun_render):
     layout, image, reference, quad_err = lee_sun_render
     index, _, _ = layout.pixel_geometry()
@@ -370,6 +373,7 @@ LEE_SMALL_ROW = [SphereSpec("lee_vgroove", {"roughness": r, "groove": g}, f"Lee 
 LEE_SMALL_SAMPLES = 1024
 
 
+@pytest.mark.release_only
 def test_lee_native_and_residual_matches_the_small_sun_reference():
     layout, image, reference, quad_err = _sun_row(
         LEE_SMALL_ROW, SMALL_SUN_DEG, 13, (8, 16), samples=LEE_SMALL_SAMPLES,

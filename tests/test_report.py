@@ -225,6 +225,7 @@ def test_smoke_comparisons_keep_energy_where_the_models_do(smoke):
     assert (out / "multiple_scattering.png").stat().st_size > 10_000
 
 
+@pytest.mark.render
 def test_smoke_comparisons_lobes_and_rendered_spheres(smoke):
     """Lobe slices: finite, non-negative, and the walk is never below its own first order
     (single-scattering Walter, height-correlated) beyond its noise, since its higher orders add

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.render
+pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 

@@ -1,0 +1,21 @@
+"""What every test shares: the marks that choose where a test runs (pytest.ini lists them).
+
+- `render`: renders with Cycles through bpy. `make test` runs these in one lane and the rest
+  beside them (scripts/test_lanes.sh).
+- `compat`: also run by the compatibility suite on every older supported Blender (a module
+  marks itself); `release_only` takes a test of such a module out of it, where it checks
+  the same maths on every version and the pinned release's run is enough.
+
+A test that uses a fixture which renders is a render test whatever its own marks say, so the
+two lanes never both pay for one fixture (the report's smoke run is two minutes).
+"""
+import pytest
+
+RENDERING_FIXTURES = {"smoke"}  # tests/test_report.py: the report's smoke run
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if RENDERING_FIXTURES & set(item.fixturenames):
+            item.add_marker(pytest.mark.render)
