@@ -33,7 +33,7 @@ pytestmark = pytest.mark.render
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
 from addon.catalog import MODELS  # noqa: E402
-from addon.lab import grid, harness  # noqa: E402
+from addon.lab import grid, harness, table_cache  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.reference import make_bsdf  # noqa: E402
 from addon.lab.reference.heitz2016 import moment_tables, table_nodes  # noqa: E402
@@ -68,21 +68,29 @@ def _nodes(values):
     return table_nodes(N_MU)
 
 
+def _key(spec):
+    """The estimator does not change the BSDF: one table per walk."""
+    values = MODELS[spec.model_id].resolve(spec.values)
+    return repr(sorted((k, v) for k, v in values.items() if k != "estimator"))
+
+
+def _compute_tables():
+    """(table, its standard errors) per spec, flat: over a minute of walks, kept on disk
+    between runs (addon/lab/table_cache.py)."""
+    rng = np.random.default_rng(2016)
+    cache = {}
+    for s in SPECS:
+        if _key(s) not in cache:
+            cache[_key(s)] = moment_tables(make_bsdf(s.model_id, s.values), _nodes(s.values),
+                                           WALKS, rng)
+    return [t for s in SPECS for t in cache[_key(s)]]
+
+
 @pytest.fixture(scope="module")
 def tables():
-    rng = np.random.default_rng(2016)
-    cache = {}  # the estimator does not change the BSDF: one table per walk
-
-    def key(spec):
-        values = MODELS[spec.model_id].resolve(spec.values)
-        return repr(sorted((k, v) for k, v in values.items() if k != "estimator"))
-
-    for s in SPECS:
-        if key(s) not in cache:
-            cache[key(s)] = moment_tables(make_bsdf(s.model_id, s.values), _nodes(s.values),
-                                          WALKS, rng)
-    pairs = [cache[key(s)] for s in SPECS]
-    return [p[0] for p in pairs], [p[1] for p in pairs]
+    inputs = ([(_key(s), _nodes(s.values).tolist()) for s in SPECS], WALKS, 2016)
+    flat = table_cache.tables("heitz2016_grid", inputs, _compute_tables)
+    return flat[0::2], flat[1::2]
 
 
 @pytest.fixture(scope="module", params=["white", "gradient"])

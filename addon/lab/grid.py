@@ -232,8 +232,10 @@ _TABLES: dict = {}  # (model, values) -> moment table, for the process
 def reference_tables(specs: list) -> list:
     """Tabulated BSDF moments for each sphere (None for a gap), by converged quadrature of the
     model's evaluation formula (addon/lab/reference/quadrature.py), computed once per process for
-    each model and set of values (glass tables take seconds)."""
+    each model and set of values (glass tables take seconds) and kept on disk between runs
+    (table_cache)."""
     from ..catalog import MODELS
+    from . import table_cache
     from .reference import make_bsdf
     from .reference.quadrature import tabulate_moments
 
@@ -248,7 +250,9 @@ def reference_tables(specs: list) -> list:
         key = (spec.model_id, tuple(sorted((k, repr(v)) for k, v in values.items()
                                            if k not in ("sampler", "estimator"))))
         if key not in _TABLES:
-            _TABLES[key] = tabulate_moments(make_bsdf(spec.model_id, spec.values))
+            _TABLES[key] = table_cache.tables(
+                "quadrature", key, lambda: [tabulate_moments(make_bsdf(spec.model_id,
+                                                                       spec.values))])[0]
         tables.append(_TABLES[key])
     return tables
 

@@ -1,0 +1,84 @@
+"""Reference moment tables kept on disk between runs.
+
+The sphere-grid references are deterministic but slow: quadrature tables of glass take seconds
+each, the Monte Carlo tables of Heitz 2016 over a minute. Every test run and report computed
+them afresh. Here a list of tables is stored once, in
+`$MICROFACET_LAB_CACHE/tables` (default ~/.cache/microfacet-lab, beside the environments),
+under a key that hashes the caller's name and inputs, numpy's version and the source of every
+Python file of the add-on and the lab (so any change to the catalog or the reference computes
+them again; an old entry is never read, only left behind). A table read back equals the one
+computed bit for bit (npz, no pickle). Set MICROFACET_LAB_TABLE_CACHE=0 to compute everything
+afresh (a cold run) without touching the cache.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .reference.quadrature import MomentTable
+
+_ADDON = Path(__file__).resolve().parent.parent
+_FIELDS = ("x", "E", "Vn", "Vt_over_sin")
+
+
+def enabled() -> bool:
+    return os.environ.get("MICROFACET_LAB_TABLE_CACHE", "1") != "0"
+
+
+def directory() -> Path:
+    root = os.environ.get("MICROFACET_LAB_CACHE") or Path.home() / ".cache" / "microfacet-lab"
+    return Path(root) / "tables"
+
+
+@functools.lru_cache(maxsize=None)
+def code_digest() -> str:
+    """Hash of every .py file of the add-on and the lab (its reference included)."""
+    h = hashlib.sha256()
+    for path in sorted(_ADDON.rglob("*.py")):
+        h.update(str(path.relative_to(_ADDON)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def key(name: str, inputs) -> str:
+    text = "\n".join((name, repr(inputs), np.__version__, code_digest()))
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _save(path: Path, tables) -> None:
+    arrays = {"count": np.array(len(tables))}
+    for i, table in enumerate(tables):
+        if table is not None:
+            arrays.update({f"{i}_{f}": getattr(table, f) for f in _FIELDS})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+    with os.fdopen(fd, "wb") as out:
+        np.savez(out, **arrays)
+    os.replace(tmp, path)  # another process computing the same tables writes the same bytes
+
+
+def _load(path: Path) -> list:
+    with np.load(path, allow_pickle=False) as data:
+        return [MomentTable(*(data[f"{i}_{f}"] for f in _FIELDS)) if f"{i}_x" in data else None
+                for i in range(int(data["count"]))]
+
+
+def tables(name: str, inputs, compute) -> list:
+    """compute() -> a list of MomentTable (or None), read from the cache when it holds this
+    name and these inputs for this code, else computed and stored."""
+    if not enabled():
+        return list(compute())
+    path = directory() / f"{name}-{key(name, inputs)}.npz"
+    if path.exists():
+        try:
+            return _load(path)
+        except (OSError, ValueError, KeyError):
+            pass  # a damaged entry: compute it again
+    result = list(compute())
+    _save(path, result)
+    return result

@@ -1,0 +1,74 @@
+"""The reference tables kept on disk between runs (addon/lab/table_cache.py): read back bit for
+bit, keyed by their inputs, never used when switched off, recomputed when damaged. What this
+catches: a cache that hands one model's table to another, or a reference that drifts from what
+its code computes."""
+import numpy as np
+import pytest
+
+from addon.lab import table_cache
+from addon.lab.reference.quadrature import MomentTable
+
+
+@pytest.fixture()
+def cache_dir(tmp_path, monkeypatch):
+    monkeypatch.setenv("MICROFACET_LAB_CACHE", str(tmp_path))
+    monkeypatch.delenv("MICROFACET_LAB_TABLE_CACHE", raising=False)
+    return tmp_path / "tables"
+
+
+def _table(seed):
+    rng = np.random.default_rng(seed)
+    return MomentTable(np.sort(rng.normal(size=5)), *(rng.normal(size=(5, 3)) for _ in range(3)))
+
+
+def _counting(result):
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return result
+    return compute, calls
+
+
+def _same(a, b):
+    return all(np.array_equal(getattr(a, f), getattr(b, f)) for f in table_cache._FIELDS)
+
+
+def test_tables_read_back_bit_for_bit(cache_dir):
+    tables = [_table(1), None, _table(2)]
+    compute, calls = _counting(tables)
+    first = table_cache.tables("t", ("a", 1), compute)
+    again = table_cache.tables("t", ("a", 1), compute)
+    assert len(calls) == 1 and len(list(cache_dir.iterdir())) == 1
+    assert again[1] is None and _same(again[0], tables[0]) and _same(again[2], tables[2])
+    assert first[0] is tables[0]
+
+
+def test_other_inputs_or_names_compute_their_own(cache_dir):
+    compute, calls = _counting([_table(3)])
+    table_cache.tables("t", ("a", 1), compute)
+    table_cache.tables("t", ("a", 2), compute)
+    table_cache.tables("u", ("a", 1), compute)
+    assert len(calls) == 3
+
+
+def test_switched_off_it_computes_and_writes_nothing(cache_dir, monkeypatch):
+    monkeypatch.setenv("MICROFACET_LAB_TABLE_CACHE", "0")
+    compute, calls = _counting([_table(4)])
+    table_cache.tables("t", 1, compute)
+    table_cache.tables("t", 1, compute)
+    assert len(calls) == 2 and not cache_dir.exists()
+
+
+def test_a_damaged_entry_is_computed_again(cache_dir):
+    compute, calls = _counting([_table(5)])
+    table_cache.tables("t", 1, compute)
+    (entry,) = cache_dir.iterdir()
+    entry.write_bytes(b"not an npz")
+    again = table_cache.tables("t", 1, compute)
+    assert len(calls) == 2 and _same(again[0], _table(5))
+
+
+def test_the_key_follows_the_code():
+    assert len(table_cache.code_digest()) == 64
+    assert table_cache.key("t", 1) != table_cache.key("t", 2)
