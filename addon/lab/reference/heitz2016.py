@@ -1,5 +1,5 @@
 """Heitz, Hanika, d'Eon & Dachsbacher 2016, "Multiple-scattering microfacet BSDFs with the Smith
-model" (SIGGRAPH 2016): the numpy twin (reference only; no OSL shader or catalog model yet).
+model" (SIGGRAPH 2016): the numpy twin of osl/heitz2016.osl (catalog model `heitz2016`).
 
     bsdf = HeitzConductor(Microfacet("ggx", 0.25), fresnel="conductor", n=..., k=...)
     bsdf = HeitzDielectric(Microfacet("ggx", 0.25), ior=1.5)
