@@ -20,6 +20,7 @@ from addon.catalog import MODELS  # noqa: E402
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.report.scenes import add_point_lamp, add_sun  # noqa: E402
+import osl_text  # noqa: E402 (tests/osl_text.py)
 
 BLACK = grid.Environment("black", 0.0)
 ROW = [SphereSpec("walter_reflection", {"roughness": 0.3}, "gold"),
@@ -39,8 +40,7 @@ def _scene(samples=16):
 
 def _lamp_count(model_id="walter_reflection") -> int:
     text = bpy.data.texts[shaders.text_name(MODELS[model_id])].as_string()
-    line = next(l for l in text.splitlines() if l.startswith("#define MFL_LAMP_COUNT"))
-    return int(line.split()[-1])
+    return int(osl_text.define(text, "MFL_LAMP_COUNT"))
 
 
 def test_a_plain_render_hands_the_lamps_over(tmp_path):

@@ -10,8 +10,6 @@ from the OSL's.
 Tolerances: the bound must hold at every sampled direction (dense, with the cone's rim, where
 a unimodal lobe has its least value); the estimator identities by 5 standard errors."""
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +18,8 @@ from addon import lamps as records_mod
 from addon.lab.reference import controls, lamps, make_bsdf, split
 from addon.lab.reference.fresnel import fresnel_conductor
 from addon.lab.reference.lamps import _frame
+import osl_text  # tests/osl_text.py
 
-ROOT = Path(__file__).resolve().parent.parent
 # Models with a residual toward lamps (a height-correlated GGX reflection has none).
 CASES = [
     ("walter_reflection", {"distribution": "beckmann", "fresnel_type": "conductor"}),
@@ -176,12 +174,12 @@ def test_cones_that_reach_the_horizon_or_overlap_are_left_out():
 
 
 def test_osl_constants_are_the_numpy_ones():
-    src = (ROOT / "osl" / "lamps.h").read_text()
+    src = osl_text.source("lamps.h")
     for name, value in (("SLOTS", controls.CONTROL_SLOTS), ("MIN_WEIGHT", controls.MIN_WEIGHT),
                         ("MARGIN", controls.MARGIN), ("MIN_HALF_ANGLE", controls.MIN_HALF_ANGLE),
                         ("HORIZON_MARGIN", controls.HORIZON_MARGIN),
                         ("GROW_CAP", controls.GROW_CAP), ("GROW_MAX", controls.GROW_MAX)):
-        assert float(re.search(rf"#define MFL_CONTROL_{name} (\S+)", src).group(1)) == value
+        assert osl_text.define_float(src, f"MFL_CONTROL_{name}") == value, name
 
 
 # --- Lee's V-grooves (symmetric): controls on the first bounce, the first bounces aimed ---------

@@ -10,8 +10,6 @@ that drift from numpy's.
 Tolerances: Monte Carlo, from the samples' own standard errors (5 sigma), and analytic
 solid angles."""
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +17,8 @@ import pytest
 from addon import lamps as records_mod
 from addon.lab.reference import lamps, make_bsdf, split
 from addon.lab.reference.microfacet import normalize
+import osl_text  # tests/osl_text.py
 
-ROOT = Path(__file__).resolve().parent.parent
 P0 = np.array([0.3, -0.2, 0.0])
 SUN = records_mod.sun_record((0.4, 0.3, 0.8), math.radians(4.0), 1.0)
 SPHERE = records_mod.sphere_record((1.0, 0.5, 2.0), 0.3, 50.0)  # Soft Falloff: a facing disk
@@ -228,12 +226,11 @@ def test_the_osl_table_holds_every_record_and_nothing_without_lamps():
 
 
 def test_osl_constants_are_the_numpy_ones():
-    src = (ROOT / "osl" / "lamps.h").read_text()
-    assert float(re.search(r"#define MFL_GUIDE_FRACTION (\S+)", src).group(1)) == \
-        lamps.GUIDE_FRACTION
-    assert float(re.search(r"#define MFL_LAMP_MARGIN (\S+)", src).group(1)) == lamps.MARGIN
+    src = osl_text.source("lamps.h")
+    assert osl_text.define_float(src, "MFL_GUIDE_FRACTION") == lamps.GUIDE_FRACTION
+    assert osl_text.define_float(src, "MFL_LAMP_MARGIN") == lamps.MARGIN
     for i, kind in enumerate(records_mod.KINDS):
-        assert re.search(rf"#define MFL_LAMP_{kind.upper()} {i}\b", src), kind
+        assert osl_text.define(src, f"MFL_LAMP_{kind.upper()}") == str(i), kind
 
 
 def test_guided_weights_stay_finite_and_non_negative_on_extreme_inputs():

@@ -5,8 +5,6 @@ derived bounce bound in closed form (the OSL shader's formula) against the searc
 from __future__ import annotations
 
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,8 +14,9 @@ from addon.lab.reference import lee, make_bsdf
 from addon.lab.reference import vgroove as vg
 from addon.lab.reference.microfacet import Microfacet
 from addon.lab.reference.quadrature import tabulate_moments
+import osl_text  # tests/osl_text.py
 
-OSL = Path(__file__).resolve().parent.parent / "osl" / "lee_vgroove.osl"
+OSL = "lee_vgroove.osl"
 GOLD_N = MODELS["lee_vgroove"].param("n").default
 GOLD_K = MODELS["lee_vgroove"].param("k").default
 GOLD = vg.fresnel_fn("conductor", n=GOLD_N, k=GOLD_K)
@@ -35,22 +34,22 @@ def test_closed_form_bound_equals_search(dist, groove):
 
 
 def test_osl_constants_match_numpy_tail_ratios():
-    text = OSL.read_text()
+    text = osl_text.source(OSL)
     for dist in ("ggx", "beckmann"):
         for groove in ("symmetric", "asymmetric"):
             name = f"LEE_TAIL_{dist.upper()}_{groove.upper()}"
-            value = float(re.search(rf"#define {name} ([0-9.eE+-]+)", text).group(1))
+            value = osl_text.define_float(text, name)
             assert value == pytest.approx(lee.tail_ratio(dist, groove), rel=1e-8), name
 
 
 def test_osl_aiming_constants_match_numpy():
     """The Native + Residual twins agree on the bounce terms aimed at the lamps, the Beckmann
     variable's cap and where the asymmetric rule's uniforms start."""
-    text = OSL.read_text()
+    text = osl_text.source(OSL)
     for name, value in (("LEE_AIMED_ORDERS", lee.AIMED_ORDERS),
                         ("LEE_PARTNER_DIM", lee.PARTNER_DIM),
                         ("LEE_BECKMANN_Y_MAX", lee.BECKMANN_Y_MAX)):
-        assert float(re.search(rf"#define {name} ([0-9.eE+-]+)", text).group(1)) == value, name
+        assert osl_text.define_float(text, name) == value, name
 
 
 def test_kmax_user_value_and_default():

@@ -6,8 +6,6 @@ the numpy ones.
 
 What this catches: a masking bound that is not a bound (separable), a residual weight that
 forgets a factor, a native Fresnel (Cycles' conductor_bsdf, dielectric_bsdf) that is not ours."""
-import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +13,8 @@ import pytest
 from addon.lab.reference import fresnel_conductor, fresnel_dielectric, make_bsdf
 from addon.lab.reference import split
 from addon.lab.reference.microfacet import normalize
+import osl_text  # tests/osl_text.py
 
-ROOT = Path(__file__).resolve().parent.parent
 NS = np.exp(np.linspace(np.log(0.001), np.log(100.0), 41))  # the catalog's range of N
 KS = np.concatenate([[0.0, 1e-4, 1e-2], np.exp(np.linspace(np.log(0.05), np.log(100.0), 25))])
 
@@ -202,10 +200,10 @@ def test_gold_native_share():
 
 
 def test_osl_constants_match_the_twin():
-    header = (ROOT / "osl" / "microfacet.h").read_text()
+    header = osl_text.source("microfacet.h")
 
     def define(name):
-        return float(re.search(rf"#define {name} (\S+)", header).group(1))
+        return osl_text.define_float(header, name)
 
     assert define("MFL_ALPHA_SPLIT_MIN") == split.ALPHA_SPLIT_MIN
     assert define("MFL_MIN_SEARCH_STEPS") == split.MIN_SEARCH_STEPS

@@ -31,6 +31,7 @@ from addon.lab.report.references import (area_lamp_term, image_world_term, point
                                           sun_unit)
 from addon.lab.report.scenes import (add_image_world, add_point_lamp, add_sun,  # noqa: E402
                                      point_radiance, spot_image)
+import osl_text  # noqa: E402 (tests/osl_text.py)
 
 SAMPLES = 256
 ROW = [
@@ -407,8 +408,7 @@ def _lamp_count_in_texts() -> int:
     from addon.catalog import MODELS
 
     text = bpy.data.texts[shaders.text_name(MODELS["walter_reflection"])].as_string()
-    line = next(l for l in text.splitlines() if l.startswith("#define MFL_LAMP_COUNT"))
-    return int(line.split()[-1])
+    return int(osl_text.define(text, "MFL_LAMP_COUNT"))
 
 
 # A Mix Shader scales every closure weight before Cycles' cutoff (1e-5) applies. The shaders keep
