@@ -17,7 +17,7 @@ import pytest
 from addon import lamps as records_mod
 from addon.lab.reference import controls, lamps, make_bsdf, split
 from addon.lab.reference.fresnel import fresnel_conductor
-from addon.lab.reference.lamps import _frame
+from addon.lab.reference.lamps import frame
 import osl_text  # tests/osl_text.py
 
 # Models with a residual toward lamps (a height-correlated GGX reflection has none).
@@ -40,7 +40,7 @@ def _cone_directions(axis, th, n, rng):
     s = np.concatenate([rng.random(n), np.ones(64)]) * (1.0 - math.cos(th))
     phi = 2.0 * math.pi * rng.random(s.shape)
     sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
-    t, b = _frame(np.asarray(axis, dtype=float)[None, :])
+    t, b = frame(np.asarray(axis, dtype=float)[None, :])
     return ((sin_t * np.cos(phi))[:, None] * t + (sin_t * np.sin(phi))[:, None] * b
             + (1.0 - s)[:, None] * axis)
 
@@ -117,9 +117,9 @@ WI = WI / np.linalg.norm(WI)
 
 def _guided(bsdf, records, n, seed, with_controls):
     u = np.random.default_rng(seed).random((n, 7))
-    return lamps.sample_guided_residual(bsdf, records, np.broadcast_to(P0, (n, 3)),
-                                        np.broadcast_to(WI, (n, 3)), u,
-                                        with_controls=with_controls)
+    sample = (controls.guided_residual_beside_controls if with_controls
+              else lamps.sample_guided_residual)
+    return sample(bsdf, records, np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3)), u)
 
 
 def _mean_and_error(x):

@@ -6,7 +6,6 @@ roughness outside [0, 1] or NaN, IOR at or below 0 or NaN, negative n or k. Roug
 perfect mirror with no division by zero: deterministic, so it is compared to the reference
 mirror without noise.
 """
-import math
 
 import numpy as np
 import pytest

@@ -1,29 +1,18 @@
-"""Heitz 2016 multiple scattering rendered in Cycles OSL (osl/heitz2016.osl) against the numpy twin
-(addon/lab/reference/heitz2016.py).
+"""Heitz 2016 multiple scattering rendered in Cycles OSL (osl/heitz2016.osl): what only the walk
+has (its sphere grids against the twin's Monte Carlo moment tables are
+tests/test_render_grids.py's `heitz2016` suite).
 
-1. Sphere grids (gold conductor and glass, GGX and Beckmann, roughness 0.3 .. 1) under the white
-   furnace and the gradient against reference images built from the twin's Monte Carlo moment
-   tables (`heitz2016.moment_tables`: 24 incidences, WALKS sampled walks each). Their standard
-   errors are carried into the tolerance: a band's bias is flagged when it exceeds the
-   Sidak-corrected z times sqrt(render noise^2 + reference error^2) plus the interpolation floor
-   grid.REFERENCE_ACCURACY; the reference error of a band is the band mean
-   of `grid.reference_error_image` (table errors added in magnitude, fully correlated across the
-   band: conservative). A power check asserts that a 1% bias of each sphere would be seen.
-   The glass rows use the twin with forward transmission dropped, as the shader must (no
-   refraction closure reaches wi.wo >= 0); tests/test_reference_heitz2016.py measures that share.
-2. The zero-noise furnace: with F = 1 every walk that escapes weighs exactly 1 and none is lost
+1. The zero-noise furnace: with F = 1 every walk that escapes weighs exactly 1 and none is lost
    at Max Bounces 100 (measured share below 1e-5), so every pixel is 1 at any roughness (the
    Stochastic estimator: the native part of Native + Residual is light-sampled, hence noisy).
-4. Light Sampling under a lamp: Native + Residual against Stochastic under a 45-degree sun over
-   a black world, pixel by pixel.
-3. Max Bounces 1 is single scattering: the walk's first order equals Walter 2007 with the
+2. Max Bounces 1 is single scattering: the walk's first order equals Walter 2007 with the
    height-correlated Smith G2 (the paper's result), held against the quadrature reference of
    `walter_reflection` (an independent formula and integrator, not the walk), and the full walk
    is measurably brighter than it at roughness 1 (multiple scattering is there).
-What this catches: a wrong height sampling or masking exponent, a wrong visible-normal sampler
-from below, eta not inverted below the interface or on back faces, a wrong Fresnel per event,
-walks cut short, a wrong exit closure (direction or weight), and the forward-transmission drop
-not matching the twin.
+3. Light Sampling under a lamp: Native + Residual against Stochastic under a 45-degree sun over
+   a black world, pixel by pixel.
+What this catches: walks cut short or weighted wrong, a first order that is not Walter's, the
+native part counted twice or missed.
 """
 import numpy as np
 import pytest
@@ -32,133 +21,9 @@ pytestmark = pytest.mark.render
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon.catalog import MODELS  # noqa: E402
-from addon.lab import grid, harness, table_cache  # noqa: E402
+from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
-from addon.lab.reference import make_bsdf  # noqa: E402
-from addon.lab.reference.heitz2016 import moment_tables, table_nodes  # noqa: E402
-from addon.lab.reference.quadrature import moments_at  # noqa: E402
-
-SAMPLES = 256
-CELL_PX = 40
-N_MU = 24
-WALKS = 200_000
-
-ROWS = [({"fresnel_type": "conductor", "distribution": d}, (0.3, 0.7, 1.0))
-        for d in ("ggx", "beckmann")]
-ROWS += [({"fresnel_type": "dielectric", "distribution": "ggx", "ior": e}, (0.3, 0.7, 1.0))
-         for e in (1.5, 1 / 1.5)]
-ROWS += [({"fresnel_type": "dielectric", "distribution": "beckmann", "ior": 1.5}, (0.3, 1.0))]
-# The GGX rows above render with the default Light Sampling (Native + Residual: the first order
-# natively); the pure stochastic walk keeps rows of its own (Beckmann is stochastic anyway).
-ROWS += [({"fresnel_type": f, "distribution": "ggx", "ior": 1.5, "estimator": "stochastic"},
-          (0.3, 1.0)) for f in ("conductor", "dielectric")]
-SPECS = [SphereSpec("heitz2016", {**values, "roughness": r},
-                    f"heitz {values['fresnel_type']} {values['distribution']} "
-                    f"eta={values.get('ior', 0):.3g} {values.get('estimator', '')} r={r}")
-         for values, rs in ROWS for r in rs]
-
-
-def _nodes(values):
-    """Glass seen from the denser side: even nodes every 0.025 in mu from 0.3 up (its moments
-    bend around the critical angle, mu 0.75 at eta 1/1.5; the 24 log-spaced nodes missed that
-    bend at roughness 0.3 by up to 0.026); else the 24 log-spaced nodes."""
-    if values["fresnel_type"] == "dielectric" and values.get("ior", 1.5) < 1.0:
-        return table_nodes(N_MU, uniform_from=0.3)
-    return table_nodes(N_MU)
-
-
-def _key(spec):
-    """The estimator does not change the BSDF: one table per walk."""
-    values = MODELS[spec.model_id].resolve(spec.values)
-    return repr(sorted((k, v) for k, v in values.items() if k != "estimator"))
-
-
-def _compute_tables():
-    """(table, its standard errors) per spec, flat: over a minute of walks, kept on disk
-    between runs (addon/lab/table_cache.py)."""
-    rng = np.random.default_rng(2016)
-    cache = {}
-    for s in SPECS:
-        if _key(s) not in cache:
-            cache[_key(s)] = moment_tables(make_bsdf(s.model_id, s.values), _nodes(s.values),
-                                           WALKS, rng)
-    return [t for s in SPECS for t in cache[_key(s)]]
-
-
-@pytest.fixture(scope="module")
-def tables():
-    inputs = ([(_key(s), _nodes(s.values).tolist()) for s in SPECS], WALKS, 2016)
-    flat = table_cache.tables("heitz2016_grid", inputs, _compute_tables)
-    return flat[0::2], flat[1::2]
-
-
-@pytest.fixture(scope="module", params=["white", "gradient"])
-def converged(request, tables):
-    env = grid.ENVIRONMENTS[request.param]
-    layout, image, _ = harness.render_specs(SPECS, env, SAMPLES, seed=1, cell_px=CELL_PX)
-    _, image2, _ = harness.render_specs(SPECS, env, SAMPLES, seed=2, cell_px=CELL_PX)
-    reference = grid.reference_image(layout, tables[0], env, moments_at)
-    error = grid.reference_error_image(layout, tables[1], env, moments_at)
-    return env, layout, image, image2, reference, error
-
-
-def _reference_error(layout, error, stats):
-    """Band mean of the reference error image, for each BandStats (same selection)."""
-    index, normal, mu = layout.pixel_geometry()
-    toward = normal[..., :2] @ grid.SIDE_DIRECTION >= 0.0
-    out = []
-    for b in stats:
-        sel = (index == b.sphere) & (mu >= b.band[0]) & (mu < b.band[1])
-        if b.side:
-            sel &= toward if b.side > 0 else ~toward
-        out.append(error[sel].mean(0))
-    return out
-
-
-def test_no_nan_and_background_is_environment(converged):
-    env, layout, image, image2, _, _ = converged
-    assert np.isfinite(image).all() and np.isfinite(image2).all()
-    background = image[grid.background_mask(layout)][:, :3]
-    assert np.allclose(background, env.radiance(-grid.VIEW), atol=1e-5)
-
-
-def test_walk_converges_to_reference(converged):
-    env, layout, image, _, reference, error = converged
-    bands = grid.band_stats(layout, image, reference)
-    ref_err = _reference_error(layout, error, bands)
-    z_crit = grid.sidak_z(3 * len(bands))
-    failures = []
-    for b, e in zip(bands, ref_err):
-        noise = np.sqrt(b.stderr ** 2 + e ** 2)
-        if (np.abs(b.bias) > z_crit * noise + grid.REFERENCE_ACCURACY).any():
-            failures.append(f"{SPECS[b.sphere].label} mu in {b.band} side {b.side}: bias {b.bias} "
-                            f"render se {b.stderr} reference se {e} ref {b.reference}")
-    assert not failures, f"z_crit {z_crit:.2f} ({env.name}):\n" + "\n".join(failures)
-
-
-def test_every_sphere_within_one_percent_with_power(converged):
-    """Both seeds pooled; each sphere's bias below 1%, and the render noise and the reference
-    error together small enough that a 1% bias would stand out (the power check)."""
-    env, layout, image, image2, reference, error = converged
-    pooled = 0.5 * (image + image2)
-    spheres = grid.band_stats(layout, pooled, reference, bands=((0.05, 1.0001),), sides=False)
-    ref_err = _reference_error(layout, error, spheres)
-    z_crit = grid.sidak_z(3 * len(spheres))
-    failures = []
-    for s, e in zip(spheres, ref_err):
-        noise = np.sqrt(s.stderr ** 2 + e ** 2) / s.reference
-        if (z_crit * noise > 0.01).any():
-            failures.append(f"{SPECS[s.sphere].label}: no power, relative noise {noise}")
-        if (np.abs(s.bias) / s.reference > 0.01).any():
-            failures.append(f"{SPECS[s.sphere].label}: relative bias {s.bias / s.reference}")
-    assert not failures, "\n".join(failures)
-
-
-def test_noise_estimate_is_calibrated(converged):
-    env, layout, image, image2, reference, _ = converged
-    failure = grid.noise_calibration_failure(layout, image, image2, reference)
-    assert not failure, failure
+from grid_suites import HEITZ  # noqa: E402
 
 
 # -- the zero-noise furnace ---------------------------------------------------------------------
@@ -193,8 +58,8 @@ def first_order():
     full = [SphereSpec("heitz2016", {**gold, "distribution": "ggx", "roughness": 1.0},
                        "heitz ggx full walk r=1")]
     all_specs = specs + full
-    layout, image, _ = harness.render_specs(all_specs, grid.GRADIENT, SAMPLES, seed=4,
-                                            cell_px=CELL_PX)
+    layout, image, _ = harness.render_specs(all_specs, grid.GRADIENT, HEITZ.samples, seed=4,
+                                            cell_px=HEITZ.cell_px)
     reference = grid.reference_grid_image(layout, controls + [None], grid.GRADIENT)
     return layout, image, reference, all_specs
 

@@ -1,18 +1,14 @@
-"""Lee 2018 multi-bounce V-grooves rendered in Cycles OSL (osl/lee_vgroove.osl) against the numpy
-twin, and the white furnace that single scattering fails.
+"""Lee 2018 multi-bounce V-grooves rendered in Cycles OSL (osl/lee_vgroove.osl): what only Lee's
+grooves have (their sphere grids against the numpy twin are tests/test_render_grids.py's `lee`
+suite).
 
-1. Sphere grids (symmetric and asymmetric grooves, GGX and Beckmann, roughness 0.05 .. 1, gold)
-   against the reference image built from LeeBRDF's deterministic directional moments
-   (addon/lab/reference/lee.py `moments`, checked against lee.sample Monte Carlo in
-   tests/test_reference_lee_moments.py), with the statistics of tests/test_render_reference.py:
-   Sidak-corrected z-test per sphere and band of mu plus the reference's accuracy, and the 1%
-   criterion per sphere on two pooled seeds with a power check.
-2. The zero-noise furnace: with F = 1 every sample weighs exactly 1, so in a white environment
+1. The zero-noise furnace: with F = 1 every sample weighs exactly 1, so in a white environment
    every sphere pixel is 1 to float precision at any roughness and sample count.
-3. Furnace grids up to alpha = 1 (the seed's figs. 21-22): Lee keeps all the energy, single
+2. Furnace grids up to alpha = 1 (the seed's figs. 21-22): Lee keeps all the energy, single
    scattering (Walter GGX with height-correlated Smith, Cook-Torrance with V-cavities) loses
    more and more as the roughness grows, and Cycles' own multiple-scattering GGX sits between.
    The numbers and the picture: scripts/lee_furnace.py (out/lee_furnace.png).
+3. Max Bounces against the twin's moments.
 """
 import numpy as np
 import pytest
@@ -24,70 +20,7 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.reference.quadrature import moments_at  # noqa: E402
-
-ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
-SAMPLES = 256
-CELL_PX = 32
-# Accuracy of the reference per groove kind (the default quadrature rules of lee.moments;
-# measured by addon/lab/bench_lee.py:moments_accuracy, floors of tests/test_reference_lee_moments.py).
-# Symmetric grooves meet grid.REFERENCE_ACCURACY's order; the asymmetric rule is a 3D
-# low-discrepancy rule, coarser at the test's time budget.
-ACCURACY = {"symmetric": 2e-4, "asymmetric": 1.5e-3}
-
-SPECS = [SphereSpec("lee_vgroove", {"groove": g, "distribution": d, "fresnel_type": "conductor",
-                                    "roughness": r}, f"lee {g} {d} r={r}")
-         for g in ("symmetric", "asymmetric") for d in ("ggx", "beckmann") for r in ROUGHNESS]
-
-
-def _floor(spec):
-    return max(grid.REFERENCE_ACCURACY, ACCURACY[spec.values["groove"]])
-
-
-@pytest.fixture(scope="module")
-def tables():
-    return grid.reference_tables(SPECS)
-
-
-@pytest.fixture(scope="module", params=["white", "gradient"])
-def converged(request, tables):
-    env = grid.ENVIRONMENTS[request.param]
-    layout, image, _ = harness.render_specs(SPECS, env, SAMPLES, seed=1, cell_px=CELL_PX)
-    _, image2, _ = harness.render_specs(SPECS, env, SAMPLES, seed=2, cell_px=CELL_PX)
-    reference = grid.reference_image(layout, tables, env, moments_at)
-    return env, layout, image, image2, reference
-
-
-def test_no_nan_and_background_is_environment(converged):
-    env, layout, image, image2, _ = converged
-    assert np.isfinite(image).all() and np.isfinite(image2).all()
-    background = image[grid.background_mask(layout)][:, :3]
-    assert np.allclose(background, env.radiance(-grid.VIEW), atol=1e-5)
-
-
-def test_lee_converges_to_reference(converged):
-    env, layout, image, _, reference = converged
-    bands = grid.band_stats(layout, image, reference)
-    z_crit = grid.sidak_z(3 * len(bands))
-    failures = []
-    for b in bands:
-        spec = SPECS[b.sphere]
-        if (np.abs(b.bias) > z_crit * b.stderr + _floor(spec)).any():
-            failures.append(f"{spec.label} mu in {b.band} side {b.side}: bias {b.bias} stderr {b.stderr} "
-                            f"ref {b.reference}")
-    assert not failures, f"z_crit {z_crit:.2f} ({env.name}):\n" + "\n".join(failures)
-
-
-def test_every_sphere_within_one_percent(converged):
-    env, layout, image, image2, reference = converged
-    pooled = 0.5 * (image + image2)
-    failures = grid.relative_bias_failures(layout, pooled, reference, [s.label for s in SPECS])
-    assert not failures, "\n".join(failures)
-
-
-def test_noise_estimate_is_calibrated(converged):
-    env, layout, image, image2, reference = converged
-    failure = grid.noise_calibration_failure(layout, image, image2, reference)
-    assert not failure, failure
+from grid_suites import LEE, lee_floor  # noqa: E402
 
 
 # -- the zero-noise furnace ---------------------------------------------------------------------
@@ -150,18 +83,18 @@ def test_max_bounces_render_matches_reference():
     are brighter and paler: fewer Fresnel factors), so the shader does read N and the twins
     give it the same meaning. One render, 6 spheres, about 10 s."""
     env = grid.ENVIRONMENTS["gradient"]
-    layout, image, _ = harness.render_specs(MB_SPECS, env, SAMPLES, seed=4, cols=3,
-                                            cell_px=CELL_PX)
+    layout, image, _ = harness.render_specs(MB_SPECS, env, LEE.samples, seed=4, cols=3,
+                                            cell_px=LEE.cell_px)
     assert np.isfinite(image).all()
     reference = grid.reference_image(layout, grid.reference_tables(MB_SPECS), env, moments_at)
     bands = grid.band_stats(layout, image, reference)
     z_crit = grid.sidak_z(3 * len(bands))
     failures = [f"{MB_SPECS[b.sphere].label} mu in {b.band} side {b.side}: bias {b.bias} "
                 f"stderr {b.stderr} ref {b.reference}" for b in bands
-                if (np.abs(b.bias) > z_crit * b.stderr + _floor(MB_SPECS[b.sphere])).any()]
+                if (np.abs(b.bias) > z_crit * b.stderr + lee_floor(MB_SPECS[b.sphere])).any()]
     assert not failures, f"z_crit {z_crit:.2f}:\n" + "\n".join(failures)
     derived = [SphereSpec(s.model_id, {**s.values, "max_bounces": 0.0}, s.label) for s in MB_SPECS]
     wrong = grid.reference_image(layout, grid.reference_tables(derived), env, moments_at)
     off = {MB_SPECS[b.sphere].values["max_bounces"] for b in grid.band_stats(layout, image, wrong)
-           if (np.abs(b.bias) > z_crit * b.stderr + _floor(MB_SPECS[b.sphere])).any()}
+           if (np.abs(b.bias) > z_crit * b.stderr + lee_floor(MB_SPECS[b.sphere])).any()}
     assert {1.0, 2.0} <= off, off

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.render
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
 from addon.lab import grid, harness, native  # noqa: E402
-from addon.lab.grid import GRADIENT, WHITE, SphereSpec  # noqa: E402
+from addon.lab.grid import SphereSpec  # noqa: E402
 
 ROUGHNESS = (0.05, 0.3, 0.7, 1.0)
 SAMPLES = 256

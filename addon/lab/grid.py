@@ -263,21 +263,61 @@ def reference_grid_image(layout: GridLayout, specs: list, env: Environment) -> n
     return reference_image(layout, reference_tables(specs), env, moments_at)
 
 
+def band_error(layout: GridLayout, error: np.ndarray, stats: list) -> list:
+    """Mean of a reference error image (reference_error_image) over each BandStats' pixels
+    (the same selection): what the reference's own standard error is in that band."""
+    index, normal, mu = layout.pixel_geometry()
+    toward = normal[..., :2] @ SIDE_DIRECTION >= 0.0
+    out = []
+    for b in stats:
+        sel = (index == b.sphere) & (mu >= b.band[0]) & (mu < b.band[1])
+        if b.side:
+            sel &= toward if b.side > 0 else ~toward
+        out.append(error[sel].mean(0))
+    return out
+
+
+def band_failures(layout: GridLayout, render: np.ndarray, reference: np.ndarray, labels: list,
+                  floors=None, error: np.ndarray | None = None) -> tuple[float, list[str]]:
+    """Every band (per sphere, band of mu and side) whose bias exceeds the Sidak z over all
+    bands and channels times its noise, plus the reference's accuracy: (z_crit, a message per
+    failing band). The noise is the render's, combined with the reference's standard error
+    where it has one (`error`: a reference_error_image of Monte Carlo tables); the accuracy is
+    `floors[sphere]` (default REFERENCE_ACCURACY for every sphere)."""
+    bands = band_stats(layout, render, reference)
+    z_crit = sidak_z(3 * len(bands))
+    errors = band_error(layout, error, bands) if error is not None else [0.0] * len(bands)
+    failures = []
+    for b, e in zip(bands, errors):
+        floor = REFERENCE_ACCURACY if floors is None else floors[b.sphere]
+        noise = np.sqrt(b.stderr ** 2 + e ** 2) if error is not None else b.stderr
+        if (np.abs(b.bias) > z_crit * noise + floor).any():
+            z = np.abs(b.bias) / np.maximum(noise, 1e-9)
+            failures.append(f"{labels[b.sphere]} mu in {b.band} side {b.side}: bias {b.bias} "
+                            f"render se {b.stderr} reference se {e} ref {b.reference} "
+                            f"z {z.max():.1f}")
+    return z_crit, failures
+
+
 def inconsistent(stats: BandStats, z_crit: float) -> bool:
     """True when a band's bias is not explained by its noise and the reference's accuracy."""
     return bool((np.abs(stats.bias) > z_crit * stats.stderr + REFERENCE_ACCURACY).any())
 
 
 def relative_bias_failures(layout: GridLayout, render: np.ndarray, reference: np.ndarray,
-                           labels: list, limit: float = 0.01) -> list[str]:
+                           labels: list, limit: float = 0.01,
+                           error: np.ndarray | None = None) -> list[str]:
     """Whole spheres (mu > 0.05) held to a relative bias below `limit`: a message per sphere
-    whose noise could not reveal such a bias (Sidak z over all spheres, the test would have
-    no power) or whose bias exceeds it; empty when every sphere passes."""
+    whose noise (the render's, with the reference's standard error where `error` gives one)
+    could not reveal such a bias (Sidak z over all spheres, the test would have no power) or
+    whose bias exceeds it; empty when every sphere passes."""
     spheres = band_stats(layout, render, reference, bands=((0.05, 1.0001),), sides=False)
     z_crit = sidak_z(3 * len(spheres))
+    errors = band_error(layout, error, spheres) if error is not None else None
     failures = []
-    for s in spheres:
-        relative_noise = s.stderr / s.reference
+    for i, s in enumerate(spheres):
+        noise = np.sqrt(s.stderr ** 2 + errors[i] ** 2) if errors is not None else s.stderr
+        relative_noise = noise / s.reference
         relative_bias = np.abs(s.bias) / s.reference
         if (relative_noise * z_crit > limit).any():
             failures.append(f"{labels[s.sphere]}: no power, relative noise {relative_noise}")

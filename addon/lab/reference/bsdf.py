@@ -14,8 +14,6 @@ pbrt-v4), and `delta_reflectance(wi)` gives its reflectance for the quadrature.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ...catalog import MODELS, alphas
@@ -142,54 +140,45 @@ class MicrofacetBRDF:
         return wo, weight, np.where(wz > 0.0, pdf, 0.0)
 
 
-def make_bsdf(model_id: str, values: dict | None = None) -> MicrofacetBRDF:
+# The catalog adapter: model id -> builder(resolved params). Each model module registers its
+# own (glass, lee, heitz2016), so this module imports none of them; the package's __init__
+# imports them all, so make_bsdf knows every model however it was reached.
+BUILDERS: dict = {}
+
+
+def builds(model_id: str):
+    """Decorator: register `builder(params) -> BSDF` for a catalog model."""
+    def register(builder):
+        BUILDERS[model_id] = builder
+        return builder
+    return register
+
+
+def make_bsdf(model_id: str, values: dict | None = None):
     """Build a catalog model from user values (resolved and clamped by the catalog)."""
     params = MODELS[model_id].resolve(values)
-    if model_id == "cook_torrance":
-        # Cook & Torrance 1982: f = d R_d + s R_s with Beckmann D, V-cavity G, exact Fresnel;
-        # normalised D (integral D cos = 1) with 4 (n.wi)(n.wo), see docs/models.md sec. 1.
-        s = params["specular"]
-        ax, ay = alphas(params["roughness"])
-        return MicrofacetBRDF(
-            Microfacet("beckmann", ax, ay), masking="vcavity", sampler=params["sampler"],
-            fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"], k=params["k"],
-            tint=(s, s, s), diffuse_albedo=tuple((1.0 - s) * c for c in params["base_color"]))
-    if model_id == "walter_reflection":
-        # Walter et al. 2007 eq. 20 (reflection part).
-        ax, ay = alphas(params["roughness"], params["anisotropy"])
-        return MicrofacetBRDF(
-            Microfacet(params["distribution"], ax, ay), masking=params["masking"],
-            sampler=params["sampler"], fresnel=params["fresnel_type"], ior=params["ior"],
-            n=params["n"], k=params["k"], tint=params["base_color"])
-    if model_id == "walter_glass":
-        # Walter et al. 2007 eqs. 20-21, reflection plus transmission (addon/lab/reference/glass.py).
-        from .glass import MicrofacetGlass
-        ax, ay = alphas(params["roughness"])
-        return MicrofacetGlass(
-            Microfacet(params["distribution"], ax, ay), masking=params["masking"],
-            sampler=params["sampler"], ior=params["ior"], tint=params["base_color"])
-    if model_id == "lee_vgroove":
-        # Lee et al. 2018 (addon/lab/reference/lee.py): kaleidoscopic multi-bounce V-grooves.
-        from .lee import LeeBRDF
-        from .microfacet import Microfacet as _Microfacet
+    if model_id not in BUILDERS:
+        raise KeyError(f"no reference implementation for model {model_id!r}")
+    return BUILDERS[model_id](params)
 
-        ax, _ = alphas(params["roughness"])
-        return LeeBRDF(_Microfacet(params["distribution"], ax), groove=params["groove"],
-                       fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"],
-                       k=params["k"], tint=params["base_color"],
-                       max_bounces_param=params["max_bounces"])
-    if model_id == "heitz2016":
-        # Heitz et al. 2016 random walk (addon/lab/reference/heitz2016.py).
-        from .heitz2016 import HeitzBSDF, HeitzConductor, HeitzDielectric
 
-        ax, _ = alphas(params["roughness"])
-        mf = Microfacet(params["distribution"], ax, ax)
-        if params["fresnel_type"] == "dielectric":
-            # As the shader renders it: Cycles' refraction closure cannot return forward transmission.
-            walk = HeitzDielectric(mf, params["ior"], tint=params["base_color"],
-                                   forward_transmission=False)
-        else:
-            walk = HeitzConductor(mf, params["fresnel_type"], n=params["n"], k=params["k"],
-                                  tint=params["base_color"])
-        return HeitzBSDF(walk, max_order=int(math.floor(params["max_order"] + 0.5)))
-    raise KeyError(f"no reference implementation for model {model_id!r}")
+@builds("cook_torrance")
+def _cook_torrance(params) -> MicrofacetBRDF:
+    # Cook & Torrance 1982: f = d R_d + s R_s with Beckmann D, V-cavity G, exact Fresnel;
+    # normalised D (integral D cos = 1) with 4 (n.wi)(n.wo), see docs/models.md sec. 1.
+    s = params["specular"]
+    ax, ay = alphas(params["roughness"])
+    return MicrofacetBRDF(
+        Microfacet("beckmann", ax, ay), masking="vcavity", sampler=params["sampler"],
+        fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"], k=params["k"],
+        tint=(s, s, s), diffuse_albedo=tuple((1.0 - s) * c for c in params["base_color"]))
+
+
+@builds("walter_reflection")
+def _walter_reflection(params) -> MicrofacetBRDF:
+    # Walter et al. 2007 eq. 20 (reflection part).
+    ax, ay = alphas(params["roughness"], params["anisotropy"])
+    return MicrofacetBRDF(
+        Microfacet(params["distribution"], ax, ay), masking=params["masking"],
+        sampler=params["sampler"], fresnel=params["fresnel_type"], ior=params["ior"],
+        n=params["n"], k=params["k"], tint=params["base_color"])

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from .lamps import cone, extents, lamp_weight, sample_guided_residual
 from .microfacet import Microfacet, dot, normalize
 from .split import conductor_min, supports_split
 
@@ -156,17 +157,16 @@ def toon_value(axis, th, wo):
 
 def lamp_bounding_cone(rec, P):
     """(axis, half-angle, valid): a cone holding every direction toward the lamp from P (sun and
-    sphere lamps: lamps._cone; rectangles and ellipses: about the centre, out to the farthest
+    sphere lamps: lamps.cone; rectangles and ellipses: about the centre, out to the farthest
     corner of the rectangle; osl lamp_bounding_cone)."""
-    from .lamps import _cone, _extents
     P = np.asarray(P, dtype=float)
     if rec.kind in ("sun", "sphere"):
-        axis, omc, sin2, valid = _cone(rec, P)
+        axis, omc, sin2, valid = cone(rec, P)
         th = np.where(rec.kind == "sun", 2.0 * np.arcsin(np.sqrt(0.5 * omc)),
                       np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
         return axis, th, valid
     c = np.asarray(rec.position, dtype=float)
-    u, v = _extents(rec)
+    u, v = extents(rec)
     axis = normalize(c - P)
     th = np.zeros(P.shape[:-1])
     for su in (-1.0, 1.0):
@@ -182,7 +182,6 @@ def select_cones(records, P, Ng):
     weight at P whose cone, widened as far as control_cone may (GROW_MAX), clears the horizon of
     Ng (here also the shading normal) and every cone chosen before it (two overlapping controls
     could sum above the residual)."""
-    from .lamps import lamp_weight
     P = np.asarray(P, dtype=float)
     chosen = []
     running = np.zeros(P.shape[:-1], dtype=int)
@@ -222,3 +221,12 @@ def controls_value(terms, wo):
     for axis, th, w, _ in terms:
         value = value + w * toon_value(axis, th, wo)[..., None]
     return value
+
+
+def guided_residual_beside_controls(bsdf, records, P, wi, u):
+    """lamps.sample_guided_residual less what the lamp controls carry: the residual as the
+    shaders return it beside them (osl sample_guided_reflection with controls)."""
+    def less(P, wi, Ng, wo):
+        return controls_value(control_terms(bsdf, records, P, wi, Ng), wo)
+    return sample_guided_residual(bsdf, records, P, wi, u, less=less)
+

@@ -56,6 +56,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...catalog import alphas
+from .bsdf import builds
 from .fresnel import fresnel_dielectric
 from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
 
@@ -263,3 +265,12 @@ class MicrofacetGlass:
             pdf = np.where(is_refl, pdf_r, pdf_t)
         w = np.where(valid, G2 * factor, 0.0)
         return wo, self.tint * w[..., None], np.where(valid, pdf, 0.0)
+
+
+@builds("walter_glass")
+def _walter_glass(params) -> MicrofacetGlass:
+    # Walter et al. 2007 eqs. 20-21, reflection plus transmission.
+    ax, ay = alphas(params["roughness"])
+    return MicrofacetGlass(
+        Microfacet(params["distribution"], ax, ay), masking=params["masking"],
+        sampler=params["sampler"], ior=params["ior"], tint=params["base_color"])

@@ -117,8 +117,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ...catalog import alphas
+from . import lamps as lamp_twin
+from .bsdf import builds
 from .fresnel import fresnel_conductor, fresnel_dielectric
-from .microfacet import Microfacet, _vec, dot, normalize, reflect
+from .microfacet import Microfacet, dot, normalize, reflect, vec
+from .quadrature import MU_MIN, MomentTable, merge
 from .special import erfinv
 
 MAX_ORDER = 100  # scattering events before a walk is stopped (counted as lost)
@@ -208,7 +212,7 @@ def sample_vndf_below(mf: Microfacet, wi, u1, u2, rng):
     ray travelling upwards meets an upward-facing facet). See the module doc for the method."""
     wi = np.asarray(wi, dtype=float)
     ax, ay = mf.alpha_x, mf.alpha_y
-    ws = normalize(_vec(ax * wi[..., 0], ay * wi[..., 1], wi[..., 2]))  # not flipped
+    ws = normalize(vec(ax * wi[..., 0], ay * wi[..., 1], wi[..., 2]))  # not flipped
     if mf.delta:  # a mirror cannot be hit from below
         return np.broadcast_to(np.array([0.0, 0.0, 1.0]), wi.shape).copy()
     if mf.ggx:
@@ -217,8 +221,8 @@ def sample_vndf_below(mf: Microfacet, wi, u1, u2, rng):
         phi = 2.0 * math.pi * np.asarray(u1, dtype=float)
         z = (1.0 - np.asarray(u2, dtype=float)) * (1.0 + ws[..., 2]) - ws[..., 2]
         sin_t = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
-        h = _vec(sin_t * np.cos(phi), sin_t * np.sin(phi), z) + ws
-        m = _vec(ax * h[..., 0], ay * h[..., 1], np.maximum(h[..., 2], 0.0))
+        h = vec(sin_t * np.cos(phi), sin_t * np.sin(phi), z) + ws
+        m = vec(ax * h[..., 0], ay * h[..., 1], np.maximum(h[..., 2], 0.0))
         return normalize(m)
     sin_t = np.sqrt(ws[..., 0] ** 2 + ws[..., 1] ** 2)
     has_phi = sin_t > 0.0
@@ -229,7 +233,7 @@ def sample_vndf_below(mf: Microfacet, wi, u1, u2, rng):
     y = erfinv(2.0 * np.asarray(u2, dtype=float) - 1.0)
     sx = (cos_phi * x - sin_phi * y) * ax
     sy = (sin_phi * x + cos_phi * y) * ay
-    return normalize(_vec(-sx, -sy, 1.0))
+    return normalize(vec(-sx, -sy, 1.0))
 
 
 def _beckmann_slope_below(a, u, rng):
@@ -423,7 +427,6 @@ class _SmithWalk:
         (WalkSample, estimate or None)."""
         wi = _rows(wi)
         n = len(wi)
-        mf = self.mf
         out_wo = np.zeros((n, 3))
         out_w = np.zeros((n, 3))
         out_order = np.full(n, max_order, dtype=int)
@@ -827,14 +830,12 @@ def moment_tables(bsdf: HeitzBSDF, mu, n_walks: int, rng):
     `table_nodes`), the second holding the standard errors of E, Vn and Vt (moments_at on it
     interpolates the errors, which is what a reference pixel's error is up to the
     interpolation weights)."""
-    from .quadrature import MomentTable, _merge
-
     mu = np.unique(np.asarray(mu, dtype=float))
     x = np.log(mu)
     m = directional_moments_mc(bsdf.walk, np.minimum(mu, 1.0 - 1e-8), n_walks, rng,
                                bsdf.max_order)
     empty = MomentTable(np.zeros(0), *(np.zeros((0, 3)),) * 3)
-    return _merge(empty, x, (m.E, m.Vn, m.Vt)), _merge(empty, x, (m.E_se, m.Vn_se, m.Vt_se))
+    return merge(empty, x, (m.E, m.Vn, m.Vt)), merge(empty, x, (m.E_se, m.Vn_se, m.Vt_se))
 
 
 def table_nodes(n_mu: int = 24, uniform_from: float | None = None, spacing: float = 0.025):
@@ -844,8 +845,6 @@ def table_nodes(n_mu: int = 24, uniform_from: float | None = None, spacing: floa
     the critical angle (where quadrature.tabulate_moments refines by itself), and cubic
     interpolation through Monte Carlo nodes wants them evenly spaced (clustered nodes amplify
     their noise)."""
-    from .quadrature import MU_MIN
-
     mu = np.exp(np.linspace(np.log(MU_MIN), 0.0, max(int(n_mu), 4)))
     if uniform_from is None:
         return mu
@@ -877,8 +876,6 @@ def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
     weighing F (1 - c), later orders their throughput) counted only outside L, over 1 - lam,
     covers the rest. Returns (wo, weight RGB); E[weight g(wo)] = integral r |cos| g for any
     records (a stale table moves noise only)."""
-    from . import lamps as lamp_twin
-
     wi = _rows(wi)
     n = len(wi)
     P = np.broadcast_to(np.asarray(P, dtype=float), (n, 3))
@@ -907,3 +904,17 @@ def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
         wo[rest] = s.wo
         weight[rest] = w
     return wo, weight
+
+
+@builds("heitz2016")
+def _heitz2016(params) -> HeitzBSDF:
+    ax, _ = alphas(params["roughness"])
+    mf = Microfacet(params["distribution"], ax, ax)
+    if params["fresnel_type"] == "dielectric":
+        # As the shader renders it: Cycles' refraction closure cannot return forward transmission.
+        walk = HeitzDielectric(mf, params["ior"], tint=params["base_color"],
+                               forward_transmission=False)
+    else:
+        walk = HeitzConductor(mf, params["fresnel_type"], n=params["n"], k=params["k"],
+                              tint=params["base_color"])
+    return HeitzBSDF(walk, max_order=int(math.floor(params["max_order"] + 0.5)))

@@ -25,7 +25,7 @@ GUIDE_FRACTION = 0.5
 MARGIN = 2e-3
 
 
-def _cone(rec: LampRecord, P):
+def cone(rec: LampRecord, P):
     """(axis, 1 - cos, sin^2, valid) of the cone toward the sun or a sphere lamp from P."""
     P = np.asarray(P, dtype=float)
     if rec.kind == "sun":
@@ -46,14 +46,14 @@ def _cone(rec: LampRecord, P):
     return axis, omc, sin2, valid
 
 
-def _extents(rec: LampRecord):
+def extents(rec: LampRecord):
     """An area lamp's half-extent axes, enlarged by MARGIN."""
     return (np.asarray(rec.u, dtype=float) * (1.0 + MARGIN),
             np.asarray(rec.v, dtype=float) * (1.0 + MARGIN))
 
 
-def _area(rec: LampRecord) -> float:
-    u, v = _extents(rec)
+def lamp_area(rec: LampRecord) -> float:
+    u, v = extents(rec)
     a = np.linalg.norm(u) * np.linalg.norm(v)
     return float(np.pi * a if rec.kind == "ellipse" else 4.0 * a)
 
@@ -74,11 +74,12 @@ def lamp_weight(rec: LampRecord, P, Ng):
     extent = np.linalg.norm(rec.u) + np.linalg.norm(rec.v)
     ok = (front > 0.0) & (dot(Ng, to) >= -extent)
     d2s = np.where(ok, d2, 1.0)
-    return np.where(ok, rec.power * front / (np.pi * np.sqrt(d2s) * np.maximum(d2s, _area(rec))),
+    return np.where(ok, rec.power * front / (np.pi * np.sqrt(d2s) *
+                                             np.maximum(d2s, lamp_area(rec))),
                     0.0)
 
 
-def _frame(axis):
+def frame(axis):
     helper = np.where((np.abs(axis[..., 2]) < 0.9)[..., None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
     t = normalize(np.cross(helper, axis))
     return t, np.cross(axis, t)
@@ -90,7 +91,7 @@ def sample_cone(axis, one_minus_cos, u1, u2):
     s = u1 * one_minus_cos
     sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
     phi = 2.0 * np.pi * u2
-    t, b = _frame(axis)
+    t, b = frame(axis)
     return ((sin_t * np.cos(phi))[..., None] * t + (sin_t * np.sin(phi))[..., None] * b
             + (1.0 - s)[..., None] * axis)
 
@@ -100,14 +101,14 @@ def sample_lamp(rec: LampRecord, P, u1, u2):
     P = np.asarray(P, dtype=float)
     u1, u2 = np.broadcast_arrays(np.asarray(u1, dtype=float), np.asarray(u2, dtype=float))
     if rec.kind in ("sun", "sphere"):
-        axis, omc, _, _ = _cone(rec, P)
+        axis, omc, _, _ = cone(rec, P)
         return sample_cone(axis, omc, u1, u2)
     if rec.kind == "ellipse":
         r = np.sqrt(u1)
         s, t = r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)
     else:
         s, t = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
-    u, v = _extents(rec)
+    u, v = extents(rec)
     q = np.asarray(rec.position) + s[..., None] * u + t[..., None] * v
     return normalize(q - P)
 
@@ -116,12 +117,12 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     """p_i(dir) over solid angle (osl lamp_pdf)."""
     P, dirs = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(dirs, dtype=float))
     if rec.kind in ("sun", "sphere"):
-        axis, omc, sin2, valid = _cone(rec, P)
+        axis, omc, sin2, valid = cone(rec, P)
         c = np.cross(dirs, axis)
         inside = valid & (dot(dirs, axis) > 0.0) & (np.sum(c * c, axis=-1) <= sin2)
         return np.where(inside, 1.0 / (2.0 * np.pi * np.where(inside, omc, 1.0)), 0.0)
     n = np.asarray(rec.axis, dtype=float)
-    (u, v), c = _extents(rec), np.asarray(rec.position, dtype=float)
+    (u, v), c = extents(rec), np.asarray(rec.position, dtype=float)
     cos_l = -dot(dirs, n)
     ok = cos_l > 0.0
     dist = np.where(ok, dot(P - c, n) / np.where(ok, cos_l, 1.0), -1.0)
@@ -130,7 +131,7 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     inside = (s * s + t * t <= 1.0) if rec.kind == "ellipse" else \
         (np.abs(s) <= 1.0) & (np.abs(t) <= 1.0)
     ok &= (dist > 0.0) & inside
-    return np.where(ok, dist * dist / (_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
+    return np.where(ok, dist * dist / (lamp_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
 
 
 def guide_fraction(records, P, Ng):
@@ -180,12 +181,13 @@ def reflection_pdf(bsdf, wi, m):
     return np.where(ok, pdf_m / (4.0 * np.where(ok, c, 1.0)), 0.0)
 
 
-def sample_guided_residual(bsdf, records, P, wi, u, with_controls: bool = False):
+def sample_guided_residual(bsdf, records, P, wi, u, less=None):
     """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
     r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
     sample_guided_reflection). u: (..., 7) uniforms: 3 for the model's sampler, the choice
-    between lamps and model, the lamp, and 2 for the lamp's direction. with_controls: r less
-    what the lamp controls carry (controls.py), as the shaders return it beside them."""
+    between lamps and model, the lamp, and 2 for the lamp's direction. less(P, wi, Ng, wo):
+    what to take off r cos (controls.guided_residual_beside_controls: the lamp controls'
+    part)."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     shape = np.broadcast_shapes(P.shape, wi.shape, u.shape[:-1] + (3,))
     P, wi = np.broadcast_to(P, shape), np.broadcast_to(wi, shape)
@@ -203,9 +205,8 @@ def sample_guided_residual(bsdf, records, P, wi, u, with_controls: bool = False)
     pdf = p_model + lam * (lamps_pdf(records, P, Ng, wo) if records else 0.0)
     r_cos = (bsdf.eval_specular(wi, wo) - eval_native(bsdf, wi, wo)) * \
         np.maximum(wo[..., 2], 0.0)[..., None]
-    if with_controls and records:
-        from .controls import control_terms, controls_value
-        r_cos = r_cos - controls_value(control_terms(bsdf, records, P, wi, Ng), wo)
+    if less is not None and records:
+        r_cos = r_cos - less(P, wi, Ng, wo)
     ok = (pdf > 0.0) & (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
     weight = np.where(ok[..., None], np.maximum(r_cos, 0.0) / np.where(ok, pdf, 1.0)[..., None],
                       0.0)

@@ -77,9 +77,13 @@ import math
 
 import numpy as np
 
+from ...catalog import alphas
+from . import controls
+from .bsdf import MicrofacetBRDF, builds
+from .lamps import GUIDE_FRACTION, sample_cone
 from .microfacet import Microfacet
 from .special import erfc
-from .vgroove import SizeBiasedTable, fresnel_fn, groove_frame
+from .vgroove import fresnel_fn, groove_frame
 
 PI = math.pi
 TRUNCATION = 1e-4  # energy allowed in paths beyond max_bounces
@@ -1135,8 +1139,6 @@ def uniforms_needed(groove: str) -> int:
 def first_order(bsdf: LeeBRDF):
     """The k = 1 term of the symmetric grooves as a BRDF: exactly the V-cavity Cook-Torrance
     model with the grooves' D and Fresnel (docs/models.md sec. 4); the lamp controls bound it."""
-    from .bsdf import MicrofacetBRDF
-
     return MicrofacetBRDF(bsdf.mf, "vcavity", "vndf", bsdf.fresnel_kind, bsdf.ior, bsdf.n,
                           bsdf.k, bsdf.tint)
 
@@ -1145,8 +1147,6 @@ def aimed_cones(bsdf: LeeBRDF, records, P, wi):
     """[(axis, th, w_K, valid)] as controls.control_terms gives them: symmetric grooves have
     lamp controls on their first bounce (the V-cavity term); an asymmetric groove's first
     bounce is not that term, so there the cones are the lamps' own, with no control (w_K = 0)."""
-    from . import controls
-
     if bsdf.groove == "symmetric":
         return controls.control_terms(first_order(bsdf), records, P, wi)
     zero = np.zeros(np.shape(wi))
@@ -1178,9 +1178,6 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p) (low_orders); otherwise a path of the sampler,
     its exit dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (...,
     uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
-    from . import controls
-    from .lamps import GUIDE_FRACTION, sample_cone
-
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
     terms = aimed_cones(bsdf, records, P, wi)
@@ -1215,3 +1212,13 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     w_path = np.where((count > 0)[:, None],
                       np.where(drop[:, None], 0.0, w_s / (1.0 - lam)[:, None]), w_s)
     return wo, np.where(aimed[:, None], w_aim, w_path), terms
+
+
+@builds("lee_vgroove")
+def _lee_vgroove(params) -> LeeBRDF:
+    # Lee et al. 2018: kaleidoscopic multi-bounce V-grooves.
+    ax, _ = alphas(params["roughness"])
+    return LeeBRDF(Microfacet(params["distribution"], ax), groove=params["groove"],
+                   fresnel=params["fresnel_type"], ior=params["ior"], n=params["n"],
+                   k=params["k"], tint=params["base_color"],
+                   max_bounces_param=params["max_bounces"])

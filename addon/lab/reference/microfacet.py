@@ -54,7 +54,7 @@ def reflect(w, m):
     return 2.0 * dot(w, m)[..., None] * m - w
 
 
-def _vec(x, y, z):
+def vec(x, y, z):
     x, y, z = np.broadcast_arrays(x, y, z)
     return np.stack([x, y, z], axis=-1).astype(float)
 
@@ -172,7 +172,7 @@ class Microfacet:
         r2 = v / (1.0 - v) if self.ggx else -np.log1p(-v)
         r = np.sqrt(r2)
         phi = 2.0 * math.pi * u2
-        return normalize(_vec(-r * np.cos(phi) * self.alpha_x, -r * np.sin(phi) * self.alpha_y,
+        return normalize(vec(-r * np.cos(phi) * self.alpha_x, -r * np.sin(phi) * self.alpha_y,
                               1.0))
 
     def pdf_dcos(self, m):
@@ -185,7 +185,7 @@ class Microfacet:
         """wi in the configuration of the alpha = 1 distribution, flipped to wi.z >= 0."""
         wi = np.asarray(wi, dtype=float)
         s = np.where(wi[..., 2] < 0.0, -1.0, 1.0)
-        return normalize(_vec(self.alpha_x * wi[..., 0] * s, self.alpha_y * wi[..., 1] * s,
+        return normalize(vec(self.alpha_x * wi[..., 0] * s, self.alpha_y * wi[..., 1] * s,
                               wi[..., 2] * s))
 
     def sample_vndf(self, wi, u1, u2):
@@ -212,9 +212,9 @@ class Microfacet:
             phi = 2.0 * math.pi * u1
             z = (1.0 - u2) * (1.0 + ws[..., 2]) - ws[..., 2]
             sin_t = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
-            h = _vec(sin_t * np.cos(phi), sin_t * np.sin(phi), z) + ws
+            h = vec(sin_t * np.cos(phi), sin_t * np.sin(phi), z) + ws
             # Degenerate h = 0 only when the cap point is exactly -wi_std (measure zero).
-            m = _vec(ax * h[..., 0], ay * h[..., 1], np.maximum(h[..., 2], 0.0))
+            m = vec(ax * h[..., 0], ay * h[..., 1], np.maximum(h[..., 2], 0.0))
             length = np.sqrt(dot(m, m))
             return np.where((length > 0.0)[..., None], m / np.maximum(length, _TINY)[..., None],
                             self._normal(shape))
@@ -227,7 +227,7 @@ class Microfacet:
         y = erfinv(2.0 * u2 - 1.0)
         sx = (cos_phi * x - sin_phi * y) * ax
         sy = (sin_phi * x + cos_phi * y) * ay
-        return normalize(_vec(-sx, -sy, 1.0))
+        return normalize(vec(-sx, -sy, 1.0))
 
     def pdf_vndf(self, wi, m):
         """D_wi(m) = G1(wi,m) max(0, wi.m) D(m) / wi.n (Heitz & d'Eon 2014 eq. 2); 0 for

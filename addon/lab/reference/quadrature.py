@@ -379,7 +379,7 @@ def _moments(bsdf, mu, order):
     return directional_moments(bsdf, mu, order=order)
 
 
-def _merge(table: MomentTable, x, moments) -> MomentTable:
+def merge(table: MomentTable, x, moments) -> MomentTable:
     """The table with nodes x (and their moments (E, Vn, Vt)) added."""
     mu = _node_mu(x)
     values = (moments[0], moments[1], moments[2] / np.sqrt(1.0 - mu * mu)[:, None])
@@ -434,7 +434,7 @@ def tabulate_moments(bsdf, n_mu: int = 48, order: int = DEFAULT_ORDER,
     Models with their own `directional_moments` (Lee) keep the uniform nodes."""
     n_mu = max(int(n_mu), 4)
     x = np.linspace(np.log(MU_MIN), 0.0, n_mu)
-    table = _merge(MomentTable(np.zeros(0), *(np.zeros((0, 3)),) * 3), x,
+    table = merge(MomentTable(np.zeros(0), *(np.zeros((0, 3)),) * 3), x,
                    _moments(bsdf, _node_mu(x), order))
     if tol is None or hasattr(bsdf, "directional_moments"):
         return table  # Lee's own moments are accurate to about 5e-5: refining would chase that
@@ -449,13 +449,13 @@ def tabulate_moments(bsdf, n_mu: int = 48, order: int = DEFAULT_ORDER,
         exact = _moments(bsdf, _node_mu(mid), order)
         guess = moments_at(table, _node_mu(mid))
         err = np.max([np.abs(a - b).max(axis=-1) for a, b in zip(exact, guess)], axis=0)
-        table = _merge(table, mid, exact)
+        table = merge(table, mid, exact)
         while len(table.x) < max_nodes:
             split = _unbalanced(table.x)
             if not split.any():
                 break
             extra = (0.5 * (table.x[:-1] + table.x[1:]))[split][: max_nodes - len(table.x)]
-            table = _merge(table, extra, _moments(bsdf, _node_mu(extra), order))
+            table = merge(table, extra, _moments(bsdf, _node_mu(extra), order))
         # Next round: both halves of every interval whose midpoint missed.
         missed = mid[err > tol]
         check = np.isin(table.x[:-1], missed) | np.isin(table.x[1:], missed)

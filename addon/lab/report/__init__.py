@@ -23,15 +23,17 @@ and draws its plots, its `page(cfg, rows, results)` returns its Markdown lines:
    run with section 1, stated in the page header.
 
 Shared modules: `config` (modes, constants, progress), `rows` (model variants x samplers,
-native twins), `references` (moment tables, the sun-disk term, the reference image), `scenes`
-(Blender scenes, the sun lamp, GPU devices), `plotting` (matplotlib), `machine` (machine,
+native twins), `lights` (the lights as numbers: directions, radiance, lamp geometry),
+`references` (moment tables, the sun-disk term, the reference image), `scenes` (Blender scenes,
+the sun lamp, GPU devices), `plotting` (matplotlib), `machine` (machine,
 versions, the page header), `page` (`write_page` assembles the header and the sections' lines)
 and `runner` (`run`: the sections in order, the page, results.json, the README figures).
 Nothing here imports bpy or matplotlib at import time.
 """
 from .config import SUN_ANGLE_DEG
 from .convergence import time_to_target
-from .references import sun_cone_nodes, sun_unit
+from .lights import sun_unit
+from .references import sun_cone_nodes
 from .runner import run
 
 __all__ = ["SUN_ANGLE_DEG", "run", "sun_cone_nodes", "sun_unit", "time_to_target"]

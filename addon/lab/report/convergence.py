@@ -16,7 +16,8 @@ from .plotting import SAMPLER_STYLE, _plt, to_display
 from .references import reference_image, relative_rmse
 from .rows import (RATIO_TO, SELF_REFERENCE_FACTOR, eval_is_fast, self_referenced, specs_for,
                    twin)
-from .scenes import build_env_scene, calibrate_sun, cone_radiance, set_border
+from .lights import cone_radiance
+from .scenes import build_env_scene, calibrate_sun, set_border
 
 
 def compute(cfg, rows, tables, progress, notes, out) -> dict:

@@ -11,7 +11,6 @@ against the exact model it stands in for, and what the branch costs where OSL ru
 """
 from __future__ import annotations
 
-import time
 
 import numpy as np
 

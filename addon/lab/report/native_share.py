@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...catalog import MODELS
 from ..reference import make_bsdf
 from ..reference import split
 

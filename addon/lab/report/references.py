@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import grid
-from .config import AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, POINT_LAMP, SUN_DIRECTION, SUN_WORLD
+from .config import AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, POINT_LAMP, SUN_WORLD
+from .lights import area_lamp_axes, hdri_spot, point_radiance, sun_unit
 
 
 def _table_key(spec):
@@ -34,11 +35,6 @@ class ReferenceTables:
                 bsdf.moment_walks = self.walks
             self.cache[key] = tabulate_moments(bsdf, order=self.order)
         return self.cache[key]
-
-
-def sun_unit() -> np.ndarray:
-    d = np.asarray(SUN_DIRECTION, dtype=float)
-    return d / np.linalg.norm(d)
 
 
 def cone_nodes(axis, half_angle, n_r: int, n_phi: int):
@@ -206,21 +202,15 @@ def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, n
     world = grid.Environment("sun world", SUN_WORLD)
     base = grid.reference_image(layout, tabs, world, moments_at)
     if env_key == "point":
-        from .scenes import point_radiance
-
         def term(n):
             return point_lamp_term(layout, specs, (0.0, 0.0, POINT_LAMP["height"]),
                                    POINT_LAMP["radius"], point_radiance(), n)
     elif CONE_LIGHTS.get(env_key, ("",))[0] == "image":
-        from .scenes import hdri_spot
-
         spot = hdri_spot(env_key, None)
 
         def term(n):  # per pixel cell: a quarter of the cone rule's radial nodes, squared
             return image_world_term(layout, specs, spot, max(2, n[0] // 4))
     elif env_key == "area":
-        from .scenes import area_lamp_axes
-
         sx, sy = AREA_LAMP["size"]
         radiance = AREA_LAMP["power"] / (np.pi * sx * sy)
 
