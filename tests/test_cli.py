@@ -208,10 +208,10 @@ def test_png_and_jpeg_are_srgb_of_the_linear_exr(tmp_path):
                         "--size", "16", cwd=tmp_path)
         assert proc.returncode == 0, log
     pytest.importorskip("bpy")
-    from addon import compat
+    from addon.lab import images
 
     # [..., :3]: without OpenImageIO (the 4.2 wheel) Blender's loader reads an RGB file as RGBA
-    image = {ext: compat.read_image(path)[..., :3] for ext, path in paths.items()}
+    image = {ext: images.read_image(path)[..., :3] for ext, path in paths.items()}
     linear = np.clip(image["exr"], 0.0, 1.0)
     srgb = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
     # measured: PNG within 1.7/255 (Blender's dither), JPEG 6/255 on average (chroma subsampling
@@ -246,9 +246,9 @@ def test_pip_bpy_renders_presets_to_png(tmp_path):
     assert proc.returncode == 0, log
     assert "[render_scene] rendering 48x24 px" in proc.stdout and "[render_scene] wrote" in proc.stdout, log
     pytest.importorskip("bpy")
-    from addon import compat
+    from addon.lab import images
 
-    pixels = np.round(compat.read_image(out) * 255).astype(np.uint8)
+    pixels = np.round(images.read_image(out) * 255).astype(np.uint8)
     assert pixels.shape == (24, 48, 3)
     gold, plastic = pixels[12, 12].astype(int), pixels[12, 36].astype(int)
     assert gold[0] > gold[2] and plastic[0] > plastic[1] + 40, (gold, plastic)

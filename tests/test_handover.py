@@ -150,7 +150,7 @@ def test_a_saved_file_renders_the_same_without_the_add_on(tmp_path):
     imports the add-on renders the same image (the residual still aimed at the lamps)."""
     from bpy_helpers import run_bpy_script
 
-    from addon import compat
+    from addon.lab import images
 
     scene = _scene(16)
     add_sun(scene, angle_deg=5.0)
@@ -161,7 +161,7 @@ def test_a_saved_file_renders_the_same_without_the_add_on(tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=False)
     out = run_bpy_script(RENDER_SAVED, tmp_path, str(blend), str(tmp_path / "farm.exr"))
     assert out["foreign_modules"] == [], out["_log"]
-    farm = compat.read_image(tmp_path / "farm.exr")
+    farm = images.read_image(tmp_path / "farm.exr")
     assert farm.shape == here.shape and here[..., :3].mean() > 0
     assert np.abs(farm - here).max() < 1e-4
 
@@ -170,9 +170,9 @@ def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
     """Render passes: an artist expects a glossy BSDF's light in Glossy Direct / Indirect (times
     Glossy Color), none in Emission. Both parts are ordinary closures (no emission() is used),
     so Combined must be the glossy passes' sum here (black world, a sun, metals only)."""
-    from addon import compat
+    from addon.lab import images
 
-    if not compat.has_openimageio():
+    if not images.has_openimageio():
         pytest.skip("reading a multilayer EXR needs the OpenImageIO bundled with bpy (5.0+)")
     import OpenImageIO as oiio
 
@@ -182,7 +182,7 @@ def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
     for name in ("use_pass_glossy_direct", "use_pass_glossy_indirect", "use_pass_glossy_color",
                  "use_pass_emit"):
         setattr(layer, name, True)
-    compat.set_multilayer_exr(scene.render.image_settings)
+    images.set_multilayer_exr(scene.render.image_settings)
     path = tmp_path / "passes.exr"
     handover.hand_over(scene)
     scene.render.filepath = str(path)

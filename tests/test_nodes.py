@@ -25,7 +25,7 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 
 from addon import compat, nodes, ui  # noqa: E402
 from addon.catalog import COLOR, ENUM, ENUMS, FACTOR, MODELS, VECTOR  # noqa: E402
-from addon.lab import harness  # noqa: E402
+from addon.lab import harness, images  # noqa: E402
 
 pytestmark = pytest.mark.compat
 
@@ -399,7 +399,7 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
         blend = str(work / "menus.blend") if mode == "menu" else "-"
         out = run_bpy_script(RENDER, work, str(ROOT), mode, str(work / "grid.exr"), blend,
                              env=env, timeout=300)
-        runs[mode] = (out, compat.read_image(work / "grid.exr"))
+        runs[mode] = (out, images.read_image(work / "grid.exr"))
     menu, menu_image = runs["menu"]
     integer, int_image = runs["int"]
     varying, _ = runs["varying"]
@@ -416,10 +416,10 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
         r, c = divmod(i, layout_cols)
         cells.setdefault((model_id, pid), []).append(menu_image[r * cell:(r + 1) * cell,
                                                                 c * cell:(c + 1) * cell, :3])
-    for key, images in cells.items():
-        for a in range(len(images)):
+    for key, tiles in cells.items():
+        for a in range(len(tiles)):
             for b in range(a):
-                assert not np.array_equal(images[a], images[b]), key
+                assert not np.array_equal(tiles[a], tiles[b]), key
 
     # Constant folding: the OSL optimizer sees the same shader groups (instances, connections,
     # ops left after constant folding) for menus as for unlinked integers ...
@@ -457,7 +457,7 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
     out = run_bpy_script(FARM, farm, str(tmp_path / "menu" / "menus.blend"), str(farm / "farm.exr"))
     assert out["foreign_modules"] == [], out["_log"]
     assert ["Sampler", "D·cos (Walter 2007)"] in out["menus"] and ["Fresnel", "None"] in out["menus"]
-    farm_image = compat.read_image(farm / "farm.exr")
+    farm_image = images.read_image(farm / "farm.exr")
     assert farm_image.shape == menu_image.shape
     assert np.abs(farm_image - menu_image).max() < 1e-4
     assert farm_image[..., :3].mean() > 0.05

@@ -51,7 +51,7 @@ report({"scripts": scripts, "foreign_modules": foreign, "repo_importable": path_
 def test_saved_material_renders_identically_without_the_addon(tmp_path, osl):
     """With OSL the shaders run from the bytecode in the file; without it (a GPU farm) the
     groups' native branches render, also saved in the file (addon/fallback.py)."""
-    from addon import compat
+    from addon.lab import images
 
     specs = [grid.SphereSpec(presets.find(p).model_id, presets.find(p).params, p) for p in PRESETS]
     layout, image, _ = harness.render_specs(specs, grid.GRADIENT, 16, seed=7, cols=3, cell_px=32,
@@ -69,7 +69,7 @@ def test_saved_material_renders_identically_without_the_addon(tmp_path, osl):
     assert len(out["scripts"]) == 2 and all(mode == "INTERNAL" and size > 1000
                                             for _, mode, size, _ in out["scripts"]), out["scripts"]
 
-    farm_image = compat.read_image(exr)
+    farm_image = images.read_image(exr)
     assert farm_image.shape == image.shape
     index, _, _ = layout.pixel_geometry()
     d = (farm_image[..., :3] - image[..., :3])[index >= 0]

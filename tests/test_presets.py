@@ -247,17 +247,17 @@ def test_malformed_preset_leaves_the_scene_untouched(ui, tmp_path, case):
 @pytest.mark.render
 def test_thumbnail_renders_tiny(tmp_path):
     pytest.importorskip("bpy")
-    from addon import compat
+    from addon.lab import images
     from addon.lab import thumbnails
 
     written = thumbnails.render_thumbnails(tmp_path, [ALL["gold"], ALL["red_plastic"]], size=24,
                                         samples=4, log=lambda *_: None)
     assert [p.name for p in written] == ["gold.png", "red_plastic.png"]
-    pixels = np.round(compat.read_image(written[0]) * 255).astype(int)
+    pixels = np.round(images.read_image(written[0]) * 255).astype(int)
     assert pixels.shape == (24, 24, 3)
     centre = pixels[12, 12].astype(int)
     assert centre[0] > centre[2] + 20  # gold: more red than blue
-    red = np.round(compat.read_image(written[1]) * 255).astype(int)[12, 12]
+    red = np.round(images.read_image(written[1]) * 255).astype(int)[12, 12]
     assert red[0] > red[1] + 40
 
 

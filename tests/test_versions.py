@@ -70,17 +70,17 @@ def test_white_furnace_spheres_match_the_reference_within_noise():
 
 @pytest.mark.parametrize("use_openimageio", [True, False], ids=["openimageio", "blender"])
 def test_png_reads_back_exactly(tmp_path, use_openimageio):
-    """compat.write_png then compat.read_image: the values written come back, row 0 at the top,
+    """images.write_png then images.read_image: the values written come back, row 0 at the top,
     three channels, through the bundled OpenImageIO and through Blender's loader (the only reader
     where the 4.2 wheel has no OpenImageIO). Catches a flipped image, a colour transform or an
     extra alpha channel."""
-    from addon import compat
+    from addon.lab import images
 
-    if use_openimageio and not compat.has_openimageio():
+    if use_openimageio and not images.has_openimageio():
         pytest.skip(f"this bpy ({bpy.app.version_string}) bundles no OpenImageIO")
     rgb = np.random.default_rng(5).random((6, 9, 3))
-    compat.write_png(tmp_path / "x.png", rgb)
-    png = compat.read_image(tmp_path / "x.png", use_openimageio)
+    images.write_png(tmp_path / "x.png", rgb)
+    png = images.read_image(tmp_path / "x.png", use_openimageio)
     assert png.shape == (6, 9, 3)
     assert np.abs(png - np.round(rgb * 255) / 255).max() < 1e-6
 
@@ -88,13 +88,13 @@ def test_png_reads_back_exactly(tmp_path, use_openimageio):
 def test_render_exr_reads_the_same_through_blender_and_openimageio(tmp_path):
     """The harness's render EXR (linear RGBA, float) read by Blender's loader equals what the
     bundled OpenImageIO reads, so 4.2 (Blender's loader only) sees the same numbers."""
-    from addon import compat
+    from addon.lab import images
 
-    if not compat.has_openimageio():
+    if not images.has_openimageio():
         pytest.skip(f"this bpy ({bpy.app.version_string}) bundles no OpenImageIO")
     path = tmp_path / "x.exr"
     harness.render_specs(FURNACE[:2], grid.GRADIENT, 2, seed=1, cols=2, cell_px=12, path=str(path))
-    by_oiio = compat.read_image(path, use_openimageio=True)
-    by_blender = compat.read_image(path, use_openimageio=False)
+    by_oiio = images.read_image(path, use_openimageio=True)
+    by_blender = images.read_image(path, use_openimageio=False)
     assert by_oiio.shape == by_blender.shape == (12, 24, 4)
     assert by_oiio[..., :3].max() > 0.1 and np.array_equal(by_oiio, by_blender)

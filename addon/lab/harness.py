@@ -1,7 +1,7 @@
 """Render harness: the sphere grid of addon/lab/grid.py built and rendered headless in Cycles.
 
 One function builds the scene (`build_grid_scene`), one renders it and reads the EXR back
-(`render`, through addon/compat.py: the OpenImageIO bundled in bpy, or Blender's image loader
+(`render`, through addon/lab/images.py: the OpenImageIO bundled in bpy, or Blender's image loader
 where the wheel has none). Settings that silently change results (docs/cycles-osl.md) are
 pinned: no Filter Glossy, no clamping, caustics on, no adaptive sampling, no denoising, and a
 0.01 px pixel filter so that a pixel sees one normal.
@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import compat
 from .. import handover, nodes
+from . import images
 from .grid import Environment, GridLayout
 
 compat.expose_bundled_modules()  # oslquery (osl_material compiles raw OSL), OpenImageIO (render)
@@ -278,7 +279,7 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
     start = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     seconds = time.perf_counter() - start
-    pixels = compat.read_image(path)
+    pixels = images.read_image(path)
     if tmp is not None:
         os.unlink(path)
     return pixels, seconds

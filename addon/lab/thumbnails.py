@@ -7,9 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .. import compat
 from ..presets import Preset, load_all
-from . import grid, harness
+from . import grid, harness, images
 from .grid import SphereSpec
 
 
@@ -31,7 +30,7 @@ def render_thumbnails(out_dir, presets: list[Preset] | None = None, size: int = 
         row, col = divmod(i, cols)
         tile = image[row * size:(row + 1) * size, col * size:(col + 1) * size, :3]
         path = out_dir / f"{preset.id}.png"
-        compat.write_png(path, linear_to_srgb(tile))
+        images.write_png(path, linear_to_srgb(tile))
         written.append(path)
         log(f"[thumbnails] wrote {path}")
     return written
