@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from addon import lamps as records_mod
+from addon import shaders
 from addon.lab.reference import lamps, make_bsdf, split
 from addon.lab.reference.microfacet import normalize
 import osl_text  # tests/osl_text.py
@@ -214,13 +215,13 @@ def test_huge_lamps_are_clamped_and_zero_size_lamps_dropped():
 
 
 def test_the_osl_table_holds_every_record_and_nothing_without_lamps():
-    assert "#define MFL_LAMP_COUNT 0" in records_mod.osl_block([])
-    assert "lamp_datum" not in records_mod.osl_block([])
+    assert "#define MFL_LAMP_COUNT 0" in shaders.lamp_table_block([])
+    assert "lamp_datum" not in shaders.lamp_table_block([])
     many = [records_mod.sphere_record((i, 0.0, 3.0), 0.1, 1.0) for i in range(100)]
-    block = records_mod.osl_block(many)
+    block = shaders.lamp_table_block(many)
     assert "#define MFL_LAMP_COUNT 100" in block
     assert f"float table[{100 * records_mod.RECORD_SIZE}]" in block
-    assert len(records_mod.osl_block(many * 2).split("{")[-1].split(",")) == \
+    assert len(shaders.lamp_table_block(many * 2).split("{")[-1].split(",")) == \
         records_mod.MAX_LAMPS * records_mod.RECORD_SIZE
     assert all(len(r.floats()) == records_mod.RECORD_SIZE for r in LAMPS)
 
