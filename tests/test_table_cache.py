@@ -72,3 +72,23 @@ def test_a_damaged_entry_is_computed_again(cache_dir):
 def test_the_key_follows_the_code():
     assert len(table_cache.code_digest()) == 64
     assert table_cache.key("t", 1) != table_cache.key("t", 2)
+
+
+def test_the_digest_covers_the_reference_sources(tmp_path, monkeypatch):
+    """A change in any file a table is computed from changes the key (so the table is computed
+    again); the catalog and the reference are among them."""
+    names = {p.name for p in table_cache._SOURCES}
+    assert {"catalog.py", "table_cache.py"} <= names
+    assert any(d.name == "reference" for d in table_cache._SOURCE_DIRS)
+    source = tmp_path / "reference" / "model.py"
+    source.parent.mkdir()
+    source.write_text("ALPHA = 1\n")
+    monkeypatch.setattr(table_cache, "_SOURCES", ())
+    monkeypatch.setattr(table_cache, "_SOURCE_DIRS", (source.parent,))
+    table_cache.code_digest.cache_clear()
+    before = table_cache.key("t", 1)
+    source.write_text("ALPHA = 2\n")
+    table_cache.code_digest.cache_clear()
+    after = table_cache.key("t", 1)
+    table_cache.code_digest.cache_clear()
+    assert before != after

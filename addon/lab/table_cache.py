@@ -4,9 +4,10 @@ The sphere-grid references are deterministic but slow: quadrature tables of glas
 each, the Monte Carlo tables of Heitz 2016 over a minute. Every test run and report computed
 them afresh. Here a list of tables is stored once, in
 `$MICROFACET_LAB_CACHE/tables` (default ~/.cache/microfacet-lab, beside the environments),
-under a key that hashes the caller's name and inputs, numpy's version and the source of every
-Python file of the add-on and the lab (so any change to the catalog or the reference computes
-them again; an old entry is never read, only left behind). A table read back equals the one
+under a key that hashes the caller's name and inputs, numpy's version and the source of what
+a table is computed from: the catalog (addon/catalog.py), the numpy reference
+(addon/lab/reference/) and this file. Any change there computes them again; an old entry is
+never read, only left behind. A table read back equals the one
 computed bit for bit (npz, no pickle). Set MICROFACET_LAB_TABLE_CACHE=0 to compute everything
 afresh (a cold run) without touching the cache.
 """
@@ -23,6 +24,9 @@ import numpy as np
 from .reference.quadrature import MomentTable
 
 _ADDON = Path(__file__).resolve().parent.parent
+# What a table is computed from (the callers pass everything else in their inputs).
+_SOURCES = (_ADDON / "catalog.py", _ADDON / "lab" / "table_cache.py")
+_SOURCE_DIRS = (_ADDON / "lab" / "reference",)
 _FIELDS = ("x", "E", "Vn", "Vt_over_sin")
 
 
@@ -37,10 +41,11 @@ def directory() -> Path:
 
 @functools.lru_cache(maxsize=None)
 def code_digest() -> str:
-    """Hash of every .py file of the add-on and the lab (its reference included)."""
+    """Hash of the catalog's, the reference's and this module's source."""
     h = hashlib.sha256()
-    for path in sorted(_ADDON.rglob("*.py")):
-        h.update(str(path.relative_to(_ADDON)).encode())
+    paths = list(_SOURCES) + [p for d in _SOURCE_DIRS for p in d.rglob("*.py")]
+    for path in sorted(paths):
+        h.update(os.path.relpath(path, _ADDON).encode())
         h.update(path.read_bytes())
     return h.hexdigest()
 
