@@ -26,11 +26,10 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
-from addon.lab.report.references import (area_lamp_term, image_world_term, point_lamp_term,
-                                         sun_term,  # noqa: E402
-                                          sun_unit)
-from addon.lab.report.scenes import (add_image_world, add_point_lamp, add_sun,  # noqa: E402
-                                     point_radiance, spot_image)
+from addon.lab.report.lights import point_radiance, spot_image, sun_unit  # noqa: E402
+from addon.lab.report.references import (area_lamp_term, image_world_term,  # noqa: E402
+                                         point_lamp_term, sun_term)
+from addon.lab.report.scenes import add_image_world, add_point_lamp, add_sun  # noqa: E402
 import osl_text  # noqa: E402 (tests/osl_text.py)
 
 SAMPLES = 256

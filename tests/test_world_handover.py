@@ -17,7 +17,8 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 
 from addon import compat, handover, world_lights  # noqa: E402
 from addon.lab import grid, harness  # noqa: E402
-from addon.lab.report.scenes import add_image_world, add_spot_world, spot_image  # noqa: E402
+from addon.lab.report.lights import spot_image  # noqa: E402
+from addon.lab.report.scenes import add_image_world, add_spot_world  # noqa: E402
 
 SPOT = np.array([0.6, 0.48, 0.64]) / np.linalg.norm([0.6, 0.48, 0.64])
 MIRROR = grid.GridLayout(1, 1, cell_px=200)

@@ -48,7 +48,7 @@ def _sphere_means(layout, image):
 
 def compute(cfg, rows, tables, progress, notes, out) -> dict:
     from ..fallback_scenes import preset_material, without_branch
-    from ...compat import write_png
+    from ..images import write_png
 
     samples, cell, repeats = _settings(cfg.mode)
     chosen = [presets.load_all()[k] for k in sorted(presets.load_all())]
