@@ -5,13 +5,13 @@ tests for every suite of tests/grid_suites.py:
   0.05 .. 1, against the reference computed by quadrature of the model's evaluation formula
   (addon/lab/reference/quadrature.py), which shares no code with the samplers the shaders use;
 - `lee`: Lee 2018 V-grooves (symmetric and asymmetric, GGX and Beckmann, gold) against LeeBRDF's
-  deterministic directional moments (addon/lab/reference/lee.py, checked against lee.sample
-  Monte Carlo in tests/test_reference_lee_moments.py);
+  deterministic directional moments (addon/lab/reference/lee/directional_moments.py, checked
+  against lee.sample Monte Carlo in tests/test_reference_lee_moments.py);
 - `heitz2016`: the Heitz 2016 walk (gold, glass from either side, GGX and Beckmann) against the
   twin's Monte Carlo moment tables (24 incidences, 200,000 walks each), whose standard errors
   join the noise (the band mean of grid.reference_error_image: table errors added in magnitude,
   fully correlated across the band, so conservative). The glass rows use the twin with forward
-  transmission dropped, as the shader must (tests/test_reference_heitz2016.py measures it).
+  transmission dropped, as the shader must (tests/test_reference_heitz2016_shader.py measures it).
 
 Each under a white furnace and a smooth gradient. Statistics: each pixel has its own random
 stream, so the noise of a mean over pixels is the scatter of the per-pixel residuals over
