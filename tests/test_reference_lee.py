@@ -1,4 +1,4 @@
-"""Lee et al. 2018 kaleidoscopic V-groove model: the closed form (addon/lab/reference/lee.py) against
+"""Lee et al. 2018 kaleidoscopic V-groove model: the closed form (addon/lab/reference/lee/) against
 the brute-force groove tracer (addon/lab/reference/vgroove.py), and the tracer against
 Cook-Torrance V-cavity single scattering. numpy only (no bpy, no GPU)."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from addon.lab.reference import lee
 from addon.lab.reference import vgroove as vg
-from addon.lab.reference.microfacet import Microfacet, dot, reflect
+from addon.lab.reference.microfacet import Microfacet, dot, reflect_about
 from addon.lab.reference.special import chi2_sf
 
 DISTS = ("ggx", "beckmann")
@@ -37,7 +37,7 @@ def ct_vcavity_albedo(wi, mf, fresnel, n=800):
     u = (np.arange(n) + 0.5) / n
     U1, U2 = np.meshgrid(u, u, indexing="ij")
     h = mf.sample_dcos(U1, U2)
-    wo = reflect(wi, h)
+    wo = reflect_about(wi, h)
     g = mf.G2(wi, wo, h, "vcavity") * np.abs(dot(wi, h)) / (wi[2] * h[..., 2])
     return (fresnel(dot(wi, h)) * g[..., None]).mean(axis=(0, 1))
 
@@ -74,7 +74,7 @@ def test_first_wall_is_the_vcavity_visible_normal_rule():
     s = mf.sample_dcos(rng.random(5000), rng.random(5000))
     wi = mf.sample_dcos(rng.random(5000), rng.random(5000))  # any upper-hemisphere directions
     t, u = vg.groove_frame(s)
-    ti, rho, _ = lee._local(wi, t, u)
+    ti, rho, _ = lee.local_angles(wi, t, u)
     ts = vg.wall_angle(s)
     fA, fB = np.cos(ti - ts), -np.cos(ti + ts)
     frac = np.clip(fA / (fA - fB), 0.0, 1.0)
@@ -87,8 +87,8 @@ def test_first_wall_is_the_vcavity_visible_normal_rule():
 @pytest.mark.parametrize("groove", vg.GROOVES)
 @pytest.mark.parametrize("dist", DISTS)
 def test_closed_form_bounce_count_and_exit_match_tracer_ray_by_ray(dist, groove):
-    """Same groove, same entry point: the analytic k and wo (eqs. 5-1, 5-2 as resolved in lee.py)
-    equal the traced ones, also for the seed's eq. 5-2 in its own sign convention."""
+    """Same groove, same entry point: the analytic k and wo (eqs. 5-1, 5-2 as resolved in
+    lee/geometry.py) equal the traced ones, also for the seed's eq. 5-2 in its own sign convention."""
     rng = np.random.default_rng(4)
     n = 100000
     for alpha in ALPHAS:
@@ -112,7 +112,7 @@ def test_closed_form_bounce_count_and_exit_match_tracer_ray_by_ray(dist, groove)
                 # Seed eq. 5-2, case "k reflections", in the seed's convention (angles negated):
                 # theta_o' = (-1)^k (theta_i' + pi - k theta_v); it must reproduce the traced wo
                 # for the first-hit-wall frame.
-                ti, _, _ = lee._local(wi, t, ax)
+                ti, _, _ = lee.local_angles(wi, t, ax)
                 tv = math.pi - 2.0 * tl
                 fA, fB = np.cos(ti - tl), -np.cos(ti + tl)
                 ell = fB + u[:, 2] * (fA - fB)

@@ -1,7 +1,7 @@
 """Lee 2018 reference for sphere images: the deterministic directional moments of LeeBRDF
-(addon/lab/reference/lee.py `moments`) against Monte Carlo of the analytic sampler `lee.sample`, the
-derived bounce bound in closed form (the OSL shader's formula) against the search
-`lee.max_bounces`, and the OSL shader's constants against the numpy twin. numpy only."""
+(addon/lab/reference/lee/directional_moments.py `moments`) against Monte Carlo of the analytic
+sampler `lee.sample`, the derived bounce bound in closed form (the OSL shader's formula) against
+the search `lee.max_bounces`, and the OSL shader's constants against the numpy twin. numpy only."""
 from __future__ import annotations
 
 import math

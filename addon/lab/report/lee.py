@@ -143,7 +143,7 @@ def page(cfg, rows, res) -> list:
     lc = cfg.lee
     L = ["## 5. Lee 2018 (V-grooves)\n",
          "Lee, Jarabo, Jeon, Gutierrez, Kim 2018: multiple mirror reflection inside V-grooves in "
-         "closed form (`lee_vgroove`, `osl/lee_vgroove.osl`, numpy twin `addon/lab/reference/lee.py`). "
+         "closed form (`lee_vgroove`, `osl/lee_vgroove.osl`, numpy twin `addon/lab/reference/lee/`). "
          "Measured by `addon/lab/bench_lee.py` (`python -m addon.lab.bench_lee` runs it alone)"
          + (" at this mode's smaller settings, stated below." if cfg.mode != "full" else ".") + "\n"]
     if lee.get("furnace"):
