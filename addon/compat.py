@@ -23,7 +23,7 @@ EXACT_CONDUCTOR_FRESNEL = bpy.app.version >= (5, 0, 0)
 # itself (its own Glass and Refraction nodes stopped doing it; 4.2.23, 4.5.15, 5.0.1, 5.1.2 and
 # 5.2.3 leave it to the shader): refraction(N, 1/1.5) on a back face bent rays as 1.5 does in
 # 5.3.0 and as 1/1.5 before. By version: the OSL library's version cannot tell (5.2.3 ships OSL
-# 1.15.3 and does not invert, 5.3.0 1.15.6 does). osl/microfacet.h, refraction_toward.
+# 1.15.3 and does not invert, 5.3.0 1.15.6 does). osl/cycles.h, refraction_toward.
 CYCLES_INVERTS_BACKFACE_IOR = bpy.app.version >= (5, 3, 0)
 # Blender 4.3 added the Metallic BSDF node (Cycles' conductor of complex IOR n + ik); before it
 # the nearest native metal is the Principled BSDF's (addon/fallback.py).

@@ -21,7 +21,7 @@ import bpy
 from bpy.app.handlers import persistent
 from mathutils import Vector
 
-from . import lamps, shaders, world_lights
+from . import lamps, shader_nodes, shaders, world_lights
 from .catalog import MODELS
 
 
@@ -107,14 +107,14 @@ def hand_over(scene, depsgraph=None) -> list[str]:
     records = scene_records(scene, depsgraph)
     changed = []
     for model in MODELS.values():
-        text = bpy.data.texts.get(shaders.text_name(model))
+        text = bpy.data.texts.get(shader_nodes.text_name(model))
         if text is None or text.as_string() == shaders.shader_source(model, records):
             continue
         users = list(_script_nodes(text))
         if not users:
             continue
         for node in users:
-            shaders.compile_script_node(node, model, records)
+            shader_nodes.compile_script_node(node, model, records)
         changed.append(text.name)
     return changed
 

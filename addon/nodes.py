@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import compat, fallback, shaders
+from . import compat, fallback, shader_nodes, shaders
 from .catalog import COLOR, ENUM, FACTOR, MODELS, VECTOR, Model, Param
 
 GROUP_PREFIX = "Microfacet Lab: "
@@ -112,7 +112,7 @@ def build_group(model: Model, menus: bool | None = None, native: bool = True):
     script = group.nodes.new("ShaderNodeScript")
     script.name = script.label = SCRIPT_NODE_NAME
     group_in.location, script.location, group_out.location = (-500, 0), (0, 0), (300, 0)
-    shaders.compile_script_node(script, model)
+    shader_nodes.compile_script_node(script, model)
     menu_row, sources = 0, {}
     for param in model.params:
         source = group_in.outputs[param.label]

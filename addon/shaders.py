@@ -1,10 +1,11 @@
-"""OSL shader sources and their compilation into Script nodes.
+"""OSL shader sources, assembled as text (no bpy: addon/shader_nodes.py puts them into text
+datablocks and compiles them into Script nodes).
 
 `shader_source(model)` assembles one self-contained OSL text from `osl/<model.shader>.osl`:
 the local headers are inlined (Cycles compiles INTERNAL scripts from a temporary file, where a
-local #include is not found), enum codes and the parameter list are generated from the catalog
-(so neither is written twice), and the documented clamps are inserted. The bpy part creates the
-text datablock and compiles it into a Script node, refusing loudly when compilation fails.
+local #include is not found), nested ones too, each header once and after the headers it
+includes; enum codes and the parameter list are generated from the catalog (so neither is
+written twice), and the documented clamps are inserted.
 """
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from . import lamps as lamp_table
 from .catalog import COLOR, ENUM, ENUMS, FLOAT, Model
 
 OSL_DIR = Path(__file__).resolve().parent.parent / "osl"
-TEXT_PREFIX = "MicrofacetLab_"
 _LOCAL_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
 _SYSTEM_HEADERS = {"stdcycles.h", "stdosl.h"}
 
@@ -89,18 +89,49 @@ def clamp_statements(model: Model) -> str:
     return "\n".join(lines)
 
 
-def _inline_headers(source: str, seen: set[str]) -> str:
-    def replace(match: re.Match) -> str:
-        name = match.group(1)
-        if name in _SYSTEM_HEADERS:
-            return match.group(0)
-        if name in seen:
-            return f"// {name}: already inlined"
-        seen.add(name)
-        header = (OSL_DIR / name).read_text()
-        return f"// ---- begin {name}\n{_inline_headers(header, seen)}\n// ---- end {name}"
+def local_includes(text: str) -> list[str]:
+    """The local headers a text #includes, in order (stdcycles.h and stdosl.h are Cycles' own)."""
+    return [name for name in _LOCAL_INCLUDE.findall(text) if name not in _SYSTEM_HEADERS]
 
-    return _LOCAL_INCLUDE.sub(replace, source)
+
+def included_headers(name: str) -> list[str]:
+    """Every local header osl/<name> needs, nested includes too, each once and after the headers
+    it includes: the order shader_source inlines them in. An include cycle is refused."""
+    order: list[str] = []
+
+    def visit(current: str, path: tuple) -> None:
+        for header in local_includes((OSL_DIR / current).read_text()):
+            if header in path:
+                raise ValueError("OSL include cycle: " + " -> ".join(path + (header,)))
+            if header not in order:
+                visit(header, path + (header,))
+                order.append(header)
+
+    visit(name, (name,))
+    return order
+
+
+def inline_headers(source: str) -> str:
+    """`source` with each local #include replaced by the header's text, nested includes first,
+    each header once (a later #include of it becomes a comment)."""
+    seen: set[str] = set()
+
+    def inline(text: str, path: tuple) -> str:
+        def replace(match: re.Match) -> str:
+            name = match.group(1)
+            if name in _SYSTEM_HEADERS:
+                return match.group(0)
+            if name in path:
+                raise ValueError("OSL include cycle: " + " -> ".join(path + (name,)))
+            if name in seen:
+                return f"// {name}: already inlined"
+            seen.add(name)
+            header = inline((OSL_DIR / name).read_text(), path + (name,))
+            return f"// ---- begin {name}\n{header}\n// ---- end {name}"
+
+        return _LOCAL_INCLUDE.sub(replace, text)
+
+    return inline(source, ())
 
 
 def lamp_table_block(records) -> str:
@@ -122,68 +153,14 @@ def shader_source(model: Model, lamps=()) -> str:
     source = (OSL_DIR / f"{model.shader}.osl").read_text()
     source = source.replace("    // @parameters", parameter_declarations(model))
     source = source.replace("    // @clamp_parameters", clamp_statements(model))
-    source = _inline_headers(source, set())
+    source = inline_headers(source)
     source = source.replace("// @lamps", lamp_table_block(lamps))
     # The enum codes and version facts precede everything, headers included.
     return enum_defines() + version_defines() + source
 
 
 def uses_lamps(model: Model) -> bool:
-    """Whether the model's shader aims at the scene's lamps (includes lamps.h)."""
-    return '#include "lamps.h"' in (OSL_DIR / f"{model.shader}.osl").read_text()
+    """Whether the model's shader aims at the scene's lamps (includes lamps.h, maybe through
+    another header)."""
+    return "lamps.h" in included_headers(f"{model.shader}.osl")
 
-
-# --- bpy ------------------------------------------------------------------------------------
-
-def text_name(model: Model) -> str:
-    return f"{TEXT_PREFIX}{model.shader}.osl"
-
-
-def ensure_text(model: Model, lamps=()):
-    """The text datablock holding the model's OSL source (with the given lamp table), created
-    or refreshed."""
-    import bpy
-
-    source = shader_source(model, lamps)
-    text = bpy.data.texts.get(text_name(model))
-    if text is None:
-        text = bpy.data.texts.new(text_name(model))
-    if text.as_string() != source:
-        text.clear()
-        text.write(source)
-    return text
-
-
-class ShaderCompileError(RuntimeError):
-    pass
-
-
-def compile_script_node(node, model: Model, lamps=()) -> None:
-    """Point an INTERNAL Script node at the model's text and compile it now.
-
-    Uses the Cycles add-on's own compile function, which works headless (the UI operator does
-    not). Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no
-    sockets and no bytecode; that case is turned into a loud error here.
-    """
-    from . import compat
-
-    compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
-
-    text = ensure_text(model, lamps)
-    node.mode = "INTERNAL"
-    node.script = text
-    messages = []
-
-    def report(kind, message):
-        messages.append(f"{kind}: {message}")
-
-    try:
-        from cycles import osl as cycles_osl
-        cycles_osl.update_script_node(node, report)
-    except ImportError:  # the Cycles add-on is absent: assigning the script compiled it already
-        pass
-    if not node.bytecode or len(node.outputs) == 0:
-        raise ShaderCompileError(
-            f"OSL compile of {text.name} produced no bytecode or no sockets"
-            + (": " + "; ".join(messages) if messages else
-               " (is Cycles OSL available? bpy.utils.expose_bundled_modules() missing?)"))

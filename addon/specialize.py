@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import compat, handover, nodes, shaders
+from . import compat, handover, nodes, shader_nodes, shaders
 from .catalog import ENUM, MODELS
 
 DIFFUSE, GLOSSY, TRANSMISSION, VOLUME, TRANSPARENT = (
@@ -124,7 +124,7 @@ def group_model(tree):
     script = tree.nodes.get(nodes.SCRIPT_NODE_NAME)
     for model in MODELS.values():
         if script is not None and script.script is not None \
-                and script.script.name == shaders.text_name(model):
+                and script.script.name == shader_nodes.text_name(model):
             return model
         if tree.name == nodes.group_name(model):
             return model
@@ -341,7 +341,7 @@ def prune_and_compile(scene, report: Report) -> None:
         if current:
             up_to_date.add(model.id)
         else:  # stale or missing bytecode: compile from the add-on's current OSL and lamps
-            shaders.compile_script_node(script, model, records)
+            shader_nodes.compile_script_node(script, model, records)
             compiled.add(model.id)
     report.compiled, report.up_to_date = sorted(compiled), sorted(up_to_date)
     referenced = _referenced_groups()
@@ -360,7 +360,7 @@ def prune_and_compile(scene, report: Report) -> None:
             if node.bl_idname == "ShaderNodeScript" and node.script is not None:
                 used_texts.add(node.script.name_full)
     for text in list(bpy.data.texts):
-        if text.name.startswith(shaders.TEXT_PREFIX) and text.name_full not in used_texts:
+        if text.name.startswith(shader_nodes.TEXT_PREFIX) and text.name_full not in used_texts:
             report.removed_texts.append(text.name)
             bpy.data.texts.remove(text)
 

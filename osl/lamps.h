@@ -1,5 +1,6 @@
-// Microfacet Lab: the residual's direct light, the twin of addon/lab/reference/lamps.py
-// (docs/light-sampling.md, "The residual's direct light").
+// Twin: addon/lab/reference/lamps.py (the residual's direct light: lamp sampling and density).
+// Microfacet Lab: the residual's direct light (docs/light-sampling.md, "The residual's direct
+// light").
 //
 // The add-on writes the scene's lamps into the table below (addon/lamps.py, slots listed
 // there). A shader draws its residual's delta-lobe direction from the mixture
@@ -10,6 +11,12 @@
 // one-sample balance heuristic). The reflected ray is an ordinary ray: it meets the lamp, or
 // whatever blocks it, and Cycles adds what it finds, so the table only moves noise: a stale or
 // missing lamp never biases, an occluder is never crossed, and no lamp is counted twice.
+#ifndef MFL_LAMPS_H
+#define MFL_LAMPS_H
+
+#include "cycles.h"
+#include "microfacet.h"
+#include "bsdf.h"
 
 // @lamps
 #define MFL_LAMP_SUN 0
@@ -211,193 +218,6 @@ vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u
 }
 #endif
 
-// ---------------------------------------------------------------------------------------
-// Lamp controls (docs/light-sampling.md, "Lamp controls"; twin: reference/controls.py). Toward
-// each of up to MFL_CONTROL_SLOTS lamps, a cone K holding the lamp's directions from P carries
-// w_K t_K: Cycles' glossy_toon about normalize(wi + a) (so that its reflected axis is the cone's
-// axis a), size th / (pi/2), no smooth, whose value times cos t_K is 1 / (2 pi (1 - cos th))
-// inside K and 0 outside (kernel/closure/bsdf_toon.h), and w_K = 2 pi (1 - cos th) times a
-// lower bound of the residual's r cos over K (cone_value_lo, microfacet.h). Cycles evaluates
-// the toon toward its lamps with multiple importance sampling, so the lamp's light through K
-// gets next-event estimation on every sample; the delta residual keeps r - sum w_K t_K >= 0.
-// Exact for any cone (a stale table only moves noise). Left out: cones that reach a horizon
-// (Cycles' toon sampler rejects directions below Ng), overlap a cone chosen before (two
-// controls could sum above r), are narrower than MFL_CONTROL_MIN_HALF_ANGLE (Cycles clamps a
-// toon's size at 1e-5; and a needle-sharp toon beside the delta residual meets Cycles' 1e6
-// stand-in pdf for deltas), or weigh less than MFL_CONTROL_MIN_WEIGHT even after widening
-// (Cycles drops closures below 1e-5: a Mix Shader factor down to 0.1 keeps every control, as
-// it keeps every delta lobe, MFL_MIN_DELTA_WEIGHT; 1e-3 left most controls out under a
-// 0.5-degree sun, whose cones hold 6e-5 sr: a rough Beckmann sphere 3.5 times noisier). A
-// small lamp's cone is widened once (control_cone) where its weight, about the lobe's value
-// times the cone's solid angle, would fall below that; weights are lowered by
-// MFL_CONTROL_MARGIN against float rounding in r.
-#define MFL_CONTROL_SLOTS 4
-#define MFL_CONTROL_MIN_WEIGHT 1e-4
-#define MFL_CONTROL_MARGIN 1e-3
-#define MFL_CONTROL_GROW_CAP 0.5
-#define MFL_CONTROL_GROW_MAX 0.1
-#define MFL_CONTROL_MIN_HALF_ANGLE 2e-3
-#define MFL_CONTROL_HORIZON_MARGIN 0.01
-
-#if MFL_LAMP_COUNT > 0
-// A cone holding every direction toward lamp i from P: lamp_cone for suns and sphere lamps;
-// about the centre out to the farthest corner of the rectangle for area lamps (an ellipse's
-// bounding rectangle). Returns 0 where there is none.
-int lamp_bounding_cone(int i, point P, output vector axis, output float th)
-{
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
-        float omc, sin2;
-        if (!lamp_cone(i, P, axis, omc, sin2))
-            return 0;
-        th = (kind == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
-                                    : asin(sqrt(clamp(sin2, 0.0, 1.0)));
-        return 1;
-    }
-    vector to = lamp_vector(i, 1) - P;
-    float d = length(to);
-    if (d <= 0.0)
-        return 0;
-    axis = to / d;
-    th = 0.0;
-    vector u = lamp_u(i);
-    vector v = lamp_v(i);
-    for (int c = 0; c < 4; c++) {
-        vector corner = normalize(to + ((c & 1) ? u : -u) + ((c & 2) ? v : -v));
-        th = max(th, acos(clamp(dot(corner, axis), -1.0, 1.0)));
-    }
-    return 1;
-}
-#endif
-
-// The chosen cones (table order, brightest first): lamps with weight at P whose cone, widened as
-// far as control_cone may (MFL_CONTROL_GROW_MAX), clears the horizons of N and Ng and every cone
-// chosen before; returns how many.
-int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_SLOTS],
-                 output float ths[MFL_CONTROL_SLOTS])
-{
-    int count = 0;
-#if MFL_LAMP_COUNT > 0
-    for (int i = 0; i < MFL_LAMP_COUNT && count < MFL_CONTROL_SLOTS; i++) {
-        vector a;
-        float th;
-        if (lamp_weight(i, P, Ng) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
-            continue;
-        float reach = max(th, MFL_CONTROL_GROW_MAX);
-        float clear = sin(reach) + MFL_CONTROL_HORIZON_MARGIN;
-        if (th < MFL_CONTROL_MIN_HALF_ANGLE || th >= 0.5 * MFL_PI || dot(a, Ng) <= clear ||
-            dot(a, Ns) <= clear)
-            continue;
-        int apart = 1;
-        for (int j = 0; j < count; j++)
-            if (acos(clamp(dot(a, axes[j]), -1.0, 1.0)) <=
-                reach + max(ths[j], MFL_CONTROL_GROW_MAX))
-                apart = 0;
-        if (!apart)
-            continue;
-        axes[count] = a;
-        ths[count] = th;
-        count += 1;
-    }
-#endif
-    return count;
-}
-
-// w_K without the tint: 2 pi (1 - cos th) cone_value_lo (1 - margin).
-color control_weight(int masking, int dist, int fresnel_type, int split, vector wi, vector a,
-                     float th, float ax, float ay, float ior, color n, color k)
-{
-    float omc = 2.0 * sin(0.5 * th) * sin(0.5 * th);
-    return cone_value_lo(masking, dist, fresnel_type, split, wi, a, th, ax, ay, ior, n, k) *
-           (2.0 * MFL_PI * omc * (1.0 - MFL_CONTROL_MARGIN));
-}
-
-// The control's half-angle th (in: the lamp's) and weight w_K without the tint (0 where left
-// out): where the lamp cone's weight would fall below MFL_CONTROL_MIN_WEIGHT, the cone is widened
-// once, to the solid angle that would give twice that at the lamp cone's bound, at most
-// MFL_CONTROL_GROW_CAP alpha_min (the lobe stays nearly constant across it) and GROW_MAX.
-color control_cone(int masking, int dist, int fresnel_type, int split, vector wi, vector a,
-                   output float th, float ax, float ay, float ior, color n, color k, color tint)
-{
-    color w = control_weight(masking, dist, fresnel_type, split, wi, a, th, ax, ay, ior, n, k);
-    color tw = tint * w;
-    float mean = (tw[0] + tw[1] + tw[2]) / 3.0;
-    if (mean < MFL_CONTROL_MIN_WEIGHT && mean > 0.0) {
-        float omc = 2.0 * sin(0.5 * th) * sin(0.5 * th);
-        float target = omc * 2.0 * MFL_CONTROL_MIN_WEIGHT / mean;
-        float cap = max(th, min(MFL_CONTROL_GROW_MAX, MFL_CONTROL_GROW_CAP * min(ax, ay)));
-        float grown = min(2.0 * asin(sqrt(min(0.5 * target, 1.0))), cap);
-        if (grown > th) {
-            th = grown;
-            w = control_weight(masking, dist, fresnel_type, split, wi, a, th, ax, ay, ior, n, k);
-            tw = tint * w;
-            mean = (tw[0] + tw[1] + tw[2]) / 3.0;
-        }
-    }
-    return (mean >= MFL_CONTROL_MIN_WEIGHT) ? w : color(0.0);
-}
-
-// The controls of a reflection residual (masking, dist, ... as cone_value_lo; split: whether the
-// GGX native part is returned beside it): their closures, tint times w_K times the toon;
-// weights[j] = w_K without the tint (0 where left out) and ths[j] its cone, for controls_value.
-closure color lamp_controls(int masking, int dist, int fresnel_type, int split, vector wi,
-                            vector t, vector b, float ax, float ay, float ior, color n, color k,
-                            color tint, output vector axes[MFL_CONTROL_SLOTS],
-                            output float ths[MFL_CONTROL_SLOTS],
-                            output color weights[MFL_CONTROL_SLOTS], output int count)
-{
-    closure color controls = 0;
-    count = select_cones(P, Ng, N, axes, ths);
-    for (int j = 0; j < count; j++) {
-        float th = ths[j];
-        color w = control_cone(masking, dist, fresnel_type, split, wi, to_local(axes[j], t, b, N),
-                               th, ax, ay, ior, n, k, tint);
-        if (w[0] + w[1] + w[2] > 0.0)  // a cone left without a control stays the lamp's
-            ths[j] = th;
-        weights[j] = w;
-        if (w[0] + w[1] + w[2] > 0.0)
-            controls += (tint * w) * glossy_toon(normalize(I + axes[j]), th / (0.5 * MFL_PI), 0.0);
-    }
-    return controls;
-}
-
-// sum_K w_K t_K(wo) (no tint) at the world direction wo: what the controls carry there.
-color controls_value(vector wo, int count, vector axes[MFL_CONTROL_SLOTS],
-                     float ths[MFL_CONTROL_SLOTS], color weights[MFL_CONTROL_SLOTS])
-{
-    color value = color(0.0);
-    for (int j = 0; j < count; j++) {
-        if (in_cone(wo, axes[j], sin(ths[j]) * sin(ths[j])))
-            value += weights[j] * cone_density(ths[j]);
-    }
-    return value;
-}
-
-// A direction uniform in one of the chosen cones (each with probability 1 / count: the lamps'
-// cones, widened where a control is; lee_vgroove.osl aims there); cones_pdf is its density.
-vector sample_cones(int count, vector axes[MFL_CONTROL_SLOTS], float ths[MFL_CONTROL_SLOTS],
-                    float u0, float u1, float u2)
-{
-#if MFL_LAMP_COUNT > 0
-    if (count > 0) {
-        int j = min(int(floor(u0 * float(count))), count - 1);
-        return sample_cone(axes[j], 2.0 * sin(0.5 * ths[j]) * sin(0.5 * ths[j]), u1, u2);
-    }
-#endif
-    return vector(0, 0, 1);
-}
-
-float cones_pdf(vector dir, int count, vector axes[MFL_CONTROL_SLOTS],
-                float ths[MFL_CONTROL_SLOTS])
-{
-    float pdf = 0.0;
-    for (int j = 0; j < count; j++) {
-        if (in_cone(dir, axes[j], sin(ths[j]) * sin(ths[j])))
-            pdf += cone_density(ths[j]);
-    }
-    return (count > 0) ? pdf / float(count) : 0.0;
-}
-
 // lam for a shading point: MFL_GUIDE_FRACTION when some lamp has weight there, else 0; total
 // receives the sum of the lamps' weights.
 float guide_fraction(point P, normal Ng, output float total)
@@ -440,9 +260,9 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 // sampler alone would give wo, which split_closures chooses with (a choice made from the
 // guided weight itself would undo the aiming: see split_closures).
 // 0 for an invalid sample.
-float sample_guided_reflection(int sampler, int dist, vector wi, float ax, float ay, vector t,
-                               vector b, normal n, vector key, output vector m,
-                               output vector wo, output float model_share, output float pdf)
+float sample_guided_residual(int sampler, int dist, vector wi, float ax, float ay, vector t,
+                             vector b, normal n, vector key, output vector m,
+                             output vector wo, output float model_share, output float pdf)
 {
     model_share = 1.0;
     pdf = 0.0;
@@ -467,3 +287,5 @@ float sample_guided_reflection(int sampler, int dist, vector wi, float ax, float
     model_share = p_model / pdf;
     return D(dist, m, ax, ay) / (4.0 * wi[2] * pdf);
 }
+
+#endif  // MFL_LAMPS_H

@@ -15,7 +15,7 @@ pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import handover, shaders  # noqa: E402
+from addon import handover, shader_nodes, shaders  # noqa: E402
 from addon.catalog import MODELS  # noqa: E402
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
@@ -39,7 +39,7 @@ def _scene(samples=16):
 
 
 def _lamp_count(model_id="walter_reflection") -> int:
-    text = bpy.data.texts[shaders.text_name(MODELS[model_id])].as_string()
+    text = bpy.data.texts[shader_nodes.text_name(MODELS[model_id])].as_string()
     return int(osl_text.define(text, "MFL_LAMP_COUNT"))
 
 
@@ -63,7 +63,7 @@ def test_a_plain_render_hands_the_lamps_over(tmp_path):
 
 
 def _model_of(node) -> str:
-    return next(m.id for m in MODELS.values() if node.script.name == shaders.text_name(m))
+    return next(m.id for m in MODELS.values() if node.script.name == shader_nodes.text_name(m))
 
 
 def test_animated_lamps_are_read_at_the_frame_rendered():

@@ -11,7 +11,7 @@ pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import compat, nodes, shaders  # noqa: E402
+from addon import compat, nodes, shader_nodes, shaders  # noqa: E402
 
 from addon.lab import grid, harness  # noqa: E402
 from addon.catalog import MODELS, ENUM  # noqa: E402
@@ -42,8 +42,8 @@ def test_compile_guard_fails_loudly_on_a_broken_shader(monkeypatch):
     monkeypatch.setattr(shaders, "shader_source", lambda m, lamps=(): "shader broken( { syntax error")
     tree = bpy.data.node_groups.new("guard", "ShaderNodeTree")
     script = tree.nodes.new("ShaderNodeScript")
-    with pytest.raises(shaders.ShaderCompileError, match="no bytecode or no sockets"):
-        shaders.compile_script_node(script, model)
+    with pytest.raises(shader_nodes.ShaderCompileError, match="no bytecode or no sockets"):
+        shader_nodes.compile_script_node(script, model)
     # The scene-level guard sees the empty node too, before any render.
     with pytest.raises(RuntimeError, match="no bytecode or no sockets"):
         harness.check_compiled()

@@ -1,5 +1,5 @@
-"""Lamp controls in numpy (addon/lab/reference/controls.py, twin of lamp_controls and
-cone_value_lo in osl/lamps.h and osl/microfacet.h, docs/light-sampling.md "Lamp controls").
+"""Lamp controls in numpy (addon/lab/reference/controls.py, twin of osl/controls.h: control_terms
+and cone_value_lo; docs/light-sampling.md "Lamp controls").
 
 What this catches: a cone bound above the residual somewhere in its cone (Cycles would then
 light-sample more than the model has there, and the shader's residual, clamped at 0, could
@@ -174,7 +174,7 @@ def test_cones_that_reach_the_horizon_or_overlap_are_left_out():
 
 
 def test_osl_constants_are_the_numpy_ones():
-    src = osl_text.source("lamps.h")
+    src = osl_text.source("controls.h")
     for name, value in (("SLOTS", controls.CONTROL_SLOTS), ("MIN_WEIGHT", controls.MIN_WEIGHT),
                         ("MARGIN", controls.MARGIN), ("MIN_HALF_ANGLE", controls.MIN_HALF_ANGLE),
                         ("HORIZON_MARGIN", controls.HORIZON_MARGIN),
@@ -194,7 +194,7 @@ def test_the_first_bounce_of_symmetric_grooves_is_the_v_cavity_model():
         bsdf = make_bsdf("lee_vgroove", values)
         wi, wo = (normalize_rows(rng.normal(size=(4000, 3))) for _ in range(2))
         wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
-        f1 = lee.eval(wi, wo, bsdf.mf, bsdf._fresnel_table, kmax=1) * bsdf.tint
+        f1 = lee.eval(wi, wo, bsdf.mf, bsdf.fresnel_table, kmax=1) * bsdf.tint
         vc = lee.first_order(bsdf).eval(wi, wo)
         np.testing.assert_allclose(f1, vc, rtol=1e-6, atol=1e-12)
 

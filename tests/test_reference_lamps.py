@@ -16,7 +16,7 @@ import pytest
 
 from addon import lamps as records_mod
 from addon import shaders
-from addon.lab.reference import lamps, make_bsdf, split
+from addon.lab.reference import bsdf as bsdf_mod, lamps, make_bsdf, split
 from addon.lab.reference.microfacet import normalize
 import osl_text  # tests/osl_text.py
 
@@ -172,7 +172,7 @@ def test_aiming_lowers_the_second_moment_under_a_small_sun(name):
     rng = np.random.default_rng(5)
     wo = lamps.sample_lamp(SUN, np.broadcast_to(P0, (n, 3)), rng.random(n), rng.random(n))
     p_sun = lamps.lamp_pdf(SUN, P0, wo)
-    p_model = lamps.reflection_pdf(bsdf, np.broadcast_to(WI, (n, 3)), normalize(WI + wo))
+    p_model = bsdf_mod.reflection_pdf(bsdf, np.broadcast_to(WI, (n, 3)), normalize(WI + wo))
     rc = _residual_cos(bsdf, wo).sum(-1)
     ok = (p_sun > 0) & (p_model > 0)
     unguided = np.mean(np.where(ok, rc ** 2 / np.where(ok, p_model * p_sun, 1.0), 0.0))

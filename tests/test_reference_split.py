@@ -1,4 +1,4 @@
-"""The light-sampled split (addon/lab/reference/split.py, twin of osl/microfacet.h): the native
+"""The light-sampled split (addon/lab/reference/split.py, twin of osl/split.h): the native
 part c(wi) F f_ggx must stay under the model for every reachable wo, or Cycles would drop the
 residual's negative weights and the render would be too dark; the residual sampler must carry
 exactly f - c F f_ggx; the native closures must carry our Fresnel; the OSL constants must be
@@ -31,7 +31,7 @@ def _dense_min(F, lo):
 
 @pytest.mark.parametrize("lo", LOS)
 def test_conductor_fresnel_minimum_is_a_tight_lower_bound(lo):
-    """Blender 4.x's native factor (osl/microfacet.h conductor_lower_bound, where Cycles'
+    """Blender 4.x's native factor (osl/split.h conductor_lower_bound, where Cycles'
     conductor_bsdf is approximate): the search's minimum never exceeds the dense grid's, and is
     tight within its margin where the grid resolves the dip."""
     n, k = np.meshgrid(NS, KS)
@@ -200,7 +200,7 @@ def test_gold_native_share():
 
 
 def test_osl_constants_match_the_twin():
-    header = osl_text.source("microfacet.h")
+    header = osl_text.source("split.h")
 
     def define(name):
         return osl_text.define_float(header, name)

@@ -4,7 +4,7 @@ The sphere-grid reference assumes an isotropic BSDF (its moments put wi in the t
 so anisotropy is held against an exact native control instead: Cycles'
 `microfacet("ggx", N, T, alpha_x, alpha_y, 0, 0)` is height-correlated Smith GGX with F = 1
 (docs/light-sampling.md), and `conductor_bsdf` adds the exact conductor Fresnel. The control
-shaders build their tangent T with the add-on's own `make_frame` (osl/microfacet.h), from the
+shaders build their tangent T with the add-on's own `make_frame` (osl/cycles.h), from the
 point-cloud spheres' dPdu, which points every way across a sphere: the tangents are not aligned
 with the view. Only the frame is shared; D, G2, the sampling and the Fresnel are Cycles'.
 
@@ -49,9 +49,9 @@ CASES = [  # (our values, native closure body with {ax}, {ay})
 
 def native_source(body: str, roughness: float) -> str:
     ax, ay = alphas(roughness, ANISOTROPY)
-    header = (shaders.OSL_DIR / "microfacet.h").read_text()
+    header = shaders.inline_headers('#include "stdcycles.h"\n#include "cycles.h"\n')
     closure = body.format(ax=ax, ay=ay, n=GOLD_N, k=GOLD_K)
-    return (shaders.enum_defines() + shaders.version_defines() + '#include "stdcycles.h"\n' + header +
+    return (shaders.enum_defines() + shaders.version_defines() + header +
             "\nshader native(output closure color BSDF = 0) {\n"
             f"    vector t, b;\n    make_frame(N, t, b);\n    BSDF = {closure};\n}}\n")
 

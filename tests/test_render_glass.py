@@ -41,7 +41,7 @@ def _rows(etas):
 # critical angle), and the nearly index-matched interface; plus Walter's own sampler and G2.
 # History: eta 1/1.5 and 3 failed here (-0.0047 +- 0.0006 and -0.0049 +- 0.0005) until the
 # moment tables refined themselves around the critical angle (quadrature.tabulate_moments) and
-# the refraction lobe's closure normal stopped being bent by Cycles at eta 3 (osl/microfacet.h,
+# the refraction lobe's closure normal stopped being bent by Cycles at eta 3 (osl/cycles.h,
 # refraction_closure_normal).
 # The GGX rows render with the default Light Sampling (Native + Residual); the last GGX row keeps
 # the pure stochastic estimator, and the separable GGX row splits with the separable bound.

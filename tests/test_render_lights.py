@@ -244,7 +244,7 @@ def test_aimed_residual_matches_the_small_sun_reference(small_sun_render):
 # cutoff of 1e-5 and were dropped with that sun's light: a rough Beckmann sphere came out 25-32%
 # dark, the toon controls did not help (they carry only the bound), and the 4-degree test above
 # did not see it. What this catches: a residual or control weight that Cycles drops (delta_weight
-# in microfacet.h, MFL_CONTROL_MIN_WEIGHT in lamps.h). Smooth lobes (roughness 0.5, 0.8) keep
+# in cycles.h, MFL_CONTROL_MIN_WEIGHT in controls.h). Smooth lobes (roughness 0.5, 0.8) keep
 # the numpy sun term accurate on its quadrature nodes.
 TINY_SUN_DEG = 0.5
 TINY_SUN_ROW = [
@@ -403,10 +403,10 @@ def test_aimed_residual_matches_an_image_world_spot():
 
 
 def _lamp_count_in_texts() -> int:
-    from addon import shaders
+    from addon import shader_nodes
     from addon.catalog import MODELS
 
-    text = bpy.data.texts[shaders.text_name(MODELS["walter_reflection"])].as_string()
+    text = bpy.data.texts[shader_nodes.text_name(MODELS["walter_reflection"])].as_string()
     return int(osl_text.define(text, "MFL_LAMP_COUNT"))
 
 

@@ -11,8 +11,8 @@ all, so make_bsdf knows every catalog model.
 from . import glass, heitz2016, lee  # noqa: F401  (they register their builders)
 from .bsdf import MicrofacetBRDF, make_bsdf
 from .fresnel import fresnel_conductor, fresnel_dielectric
-from .microfacet import Microfacet, dot, normalize, reflect
+from .microfacet import Microfacet, dot, normalize, reflect_about
 from .special import erf, erfc, erfinv
 
 __all__ = ["Microfacet", "MicrofacetBRDF", "make_bsdf", "fresnel_dielectric",
-           "fresnel_conductor", "erf", "erfc", "erfinv", "dot", "normalize", "reflect"]
+           "fresnel_conductor", "erf", "erfc", "erfinv", "dot", "normalize", "reflect_about"]

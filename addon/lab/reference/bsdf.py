@@ -11,14 +11,18 @@ Roughness 0 (alpha below 1e-7) makes the specular lobe a perfect mirror: `eval` 
 `eval_specular` return 0 for that delta part (a delta has no finite value), `sample` returns the
 mirror direction with weight F * tint and pdf 1 (the discrete probability of the delta, as
 pbrt-v4), and `delta_reflectance(wi)` gives its reflectance for the quadrature.
+
+The twin of osl/bsdf.h: sample_reflection_factor and reflection_pdf (the shaders' one
+reflection sample per sampler and its density); the OSL's sample_reflection is `sample` here,
+with the Fresnel factor and the tint.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ...catalog import MODELS, alphas
-from .fresnel import fresnel_conductor, fresnel_dielectric
-from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
+from .fresnel import fresnel_color
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect_about
 
 _TINY = 1e-30
 
@@ -48,12 +52,7 @@ class MicrofacetBRDF:
 
     def F(self, cos_i):
         """RGB Fresnel factor (..., 3) at cos_i = wi.m."""
-        cos_i = np.asarray(cos_i, dtype=float)
-        if self.fresnel == "dielectric":
-            return fresnel_dielectric(cos_i, self.ior)[..., None] * np.ones(3)
-        if self.fresnel == "conductor":
-            return fresnel_conductor(cos_i[..., None], self.n, self.k)
-        return np.ones(cos_i.shape + (3,))
+        return fresnel_color(self.fresnel, cos_i, self.ior, self.n, self.k)
 
     def eval_specular(self, wi, wo):
         """Specular lobe f_s (..., 3); 0 for the delta lobe (roughness 0)."""
@@ -131,13 +130,37 @@ class MicrofacetBRDF:
             wo = wi * np.array([-1.0, -1.0, 1.0])
             return wo, self.delta_reflectance(wi), np.where(wz > 0.0, 1.0, 0.0)
         m, pdf_m = self.sample_normal(wi, u)
-        wo = reflect(wi, m)
+        wo = reflect_about(wi, m)
         c = dot(wi, m)
         pdf = pdf_m / (4.0 * np.maximum(np.abs(c), _TINY))
         w = self.mf.G2(wi, wo, m, self.masking) * self.inv_pdf_factor(wi, m)
         valid = (wz > 0.0) & (wo[..., 2] > 0.0) & (c > 0.0) & (pdf_m > 0.0)
         weight = np.where(valid[..., None], self.tint * self.F(c) * w[..., None], 0.0)
         return wo, weight, np.where(wz > 0.0, pdf, 0.0)
+
+
+def sample_reflection_factor(bsdf: MicrofacetBRDF, wi, u):
+    """(m, factor): the sampler's microfacet normal m for wi and its part of the reflection
+    sample weight, f cos / (F G2 tint pdf) (`inv_pdf_factor`), 0 where wi.n <= 0 or wi.m <= 0
+    (osl sample_reflection_factor). u (..., 3): the sampler's uniforms."""
+    wi = np.asarray(wi, dtype=float)
+    m, _ = bsdf.sample_normal(wi, u)
+    ok = (wi[..., 2] > 0.0) & (dot(wi, m) > 0.0)
+    return m, np.where(ok, bsdf.inv_pdf_factor(wi, m), 0.0)
+
+
+def reflection_pdf(bsdf: MicrofacetBRDF, wi, m):
+    """The model sampler's density of wo = reflect_about(wi, m): pdf_m(m) / (4 wi.m) (osl
+    reflection_pdf)."""
+    mf, c = bsdf.mf, dot(wi, m)
+    if bsdf.sampler == "dcos":
+        pdf_m = mf.pdf_dcos(m)
+    elif bsdf.sampler == "vndf":
+        pdf_m = mf.pdf_vndf(wi, m)
+    else:
+        pdf_m = mf.pdf_vcavity(wi, m)
+    ok = (c > 0.0) & (m[..., 2] > 0.0) & (wi[..., 2] > 0.0)
+    return np.where(ok, pdf_m / (4.0 * np.where(ok, c, 1.0)), 0.0)
 
 
 # The catalog adapter: model id -> builder(resolved params). Each model module registers its

@@ -1,6 +1,6 @@
 """Lamp controls in numpy: the part of the residual toward each lamp that Cycles light-samples,
-the twin of `lamp_controls`/`cone_value_lo` in osl/lamps.h and osl/microfacet.h
-(docs/light-sampling.md, "Lamp controls").
+the twin of osl/controls.h (`control_terms`, `cone_value_lo`; docs/light-sampling.md, "Lamp
+controls").
 
 For a lamp whose directions from P lie in a cone K (axis a, half-angle th), the shader returns
 Cycles' `glossy_toon(normalize(wi + a), th / (pi/2), 0)`: a lobe uniform over K, whose value
@@ -23,11 +23,11 @@ import math
 
 import numpy as np
 
-from .lamps import cone, extents, lamp_weight, sample_guided_residual
+from .lamps import cone_density, extents, lamp_cone, lamp_weight, sample_guided_residual
 from .microfacet import Microfacet, dot, normalize
 from .split import conductor_min, supports_split
 
-# osl/lamps.h MFL_CONTROL_*: at most this many controls per shading point; a control whose mean
+# osl/controls.h MFL_CONTROL_*: at most this many controls per shading point; a control whose mean
 # weight is below MIN_WEIGHT is widened or left out (Cycles drops closures below 1e-5, so a
 # Mix Shader factor down to 0.1 keeps every control, as for delta lobes); GROW_CAP, GROW_MAX: how far a small
 # lamp's cone may be widened (times alpha_min, radians); weights are lowered
@@ -149,19 +149,18 @@ def toon_value(axis, th, wo):
     1 / (2 pi (1 - cos th)) inside the cone, else 0 (kernel/closure/bsdf_toon.h)."""
     axis, wo = np.broadcast_arrays(np.asarray(axis, dtype=float), np.asarray(wo, dtype=float))
     th = np.asarray(th, dtype=float)
-    omc = 2.0 * np.sin(0.5 * th) ** 2
     c = np.cross(wo, axis)
     inside = (dot(wo, axis) > 0.0) & (np.sum(c * c, axis=-1) < np.sin(th) ** 2)
-    return np.where(inside, 1.0 / (2.0 * math.pi * np.maximum(omc, 1e-30)), 0.0)
+    return np.where(inside, cone_density(th), 0.0)
 
 
 def lamp_bounding_cone(rec, P):
     """(axis, half-angle, valid): a cone holding every direction toward the lamp from P (sun and
-    sphere lamps: lamps.cone; rectangles and ellipses: about the centre, out to the farthest
+    sphere lamps: lamps.lamp_cone; rectangles and ellipses: about the centre, out to the farthest
     corner of the rectangle; osl lamp_bounding_cone)."""
     P = np.asarray(P, dtype=float)
     if rec.kind in ("sun", "sphere"):
-        axis, omc, sin2, valid = cone(rec, P)
+        axis, omc, sin2, valid = lamp_cone(rec, P)
         th = np.where(rec.kind == "sun", 2.0 * np.arcsin(np.sqrt(0.5 * omc)),
                       np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
         return axis, th, valid
@@ -200,7 +199,7 @@ def select_cones(records, P, Ng):
 
 
 def control_terms(bsdf, records, P, wi, Ng=(0.0, 0.0, 1.0)):
-    """[(axis, th, w_K, valid)] of the chosen cones at P for wi (osl lamp_controls): w_K tint
+    """[(axis, th, w_K, valid)] of the chosen cones at P for wi (osl control_terms): w_K tint
     included, 0 where left out; th the control's cone, the lamp's where it has no control;
     valid where select_cones chose the cone."""
     P, wi = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(wi, dtype=float))
@@ -225,7 +224,7 @@ def controls_value(terms, wo):
 
 def guided_residual_beside_controls(bsdf, records, P, wi, u):
     """lamps.sample_guided_residual less what the lamp controls carry: the residual as the
-    shaders return it beside them (osl sample_guided_reflection with controls)."""
+    shaders return it beside them (osl sample_guided_residual with controls)."""
     def less(P, wi, Ng, wo):
         return controls_value(control_terms(bsdf, records, P, wi, Ng), wo)
     return sample_guided_residual(bsdf, records, P, wi, u, less=less)

@@ -1,4 +1,5 @@
-"""Exact unpolarised Fresnel reflectance (scalar per direction, or per RGB channel).
+"""Exact unpolarised Fresnel reflectance (scalar per direction, or per RGB channel), and
+`fresnel_color`, the one dispatcher on a model's Fresnel choice. The twin of osl/fresnel.h.
 
 Shapes: `cos_i` is any array; the result has the broadcast shape of the arguments. For RGB
 conductors pass `cos_i[..., None]` with `n`, `k` of shape (3,): the result is (..., 3).
@@ -45,3 +46,21 @@ def fresnel_conductor(cos_i, n, k):
     r_s = np.where(ds == 0, 1.0, (c - eta * cos_t) / np.where(ds == 0, 1.0, ds))
     r_p = np.where(dp == 0, 1.0, (eta * c - cos_t) / np.where(dp == 0, 1.0, dp))
     return 0.5 * (np.abs(r_s) ** 2 + np.abs(r_p) ** 2)
+
+
+FRESNEL_KINDS = ("none", "dielectric", "conductor")
+
+
+def fresnel_color(kind: str, cos_i, ior, n, k):
+    """The Fresnel factor (..., 3) of a model's Fresnel choice at cos_i (...) per RGB channel:
+    'dielectric' (eta = ior, grey), 'conductor' (complex IOR n + ik per channel, n and k of
+    shape (3,)) or 'none' (1, exactly). The one dispatcher (osl fresnel_color)."""
+    cos_i = np.asarray(cos_i, dtype=float)
+    if kind == "dielectric":
+        return fresnel_dielectric(cos_i, ior)[..., None] * np.ones(3)
+    if kind == "conductor":
+        return fresnel_conductor(cos_i[..., None], np.asarray(n, dtype=float),
+                                 np.asarray(k, dtype=float))
+    if kind == "none":
+        return np.ones(cos_i.shape + (3,))
+    raise ValueError(f"fresnel kind must be one of {FRESNEL_KINDS}, not {kind!r}")

@@ -59,29 +59,14 @@ import numpy as np
 from ...catalog import alphas
 from .bsdf import builds
 from .fresnel import fresnel_dielectric
-from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect_about, refract_about
 
 _TINY = 1e-30
 PASS_THROUGH_EPS = 1e-5  # |eta - 1| below this is index matched (as the OSL shader)
 
 
-def refract(wi, m, eta):
-    """Refraction of wi through a facet m (wi.m > 0), eta = n_o / n_i (Walter 2007 eq. 40):
-    wo = (c / eta - sqrt(1 - (1 - c^2) / eta^2)) m - wi / eta, c = wi.m.
-    Returns (wo, ok); ok is False under TIR (wo is then (0, 0, 1), a placeholder)."""
-    wi = np.asarray(wi, dtype=float)
-    m = np.asarray(m, dtype=float)
-    c = dot(wi, m)
-    cos_t2 = 1.0 - (1.0 - c * c) / (eta * eta)
-    ok = cos_t2 > 0.0
-    ct = np.sqrt(np.maximum(cos_t2, 0.0))
-    wo = (c / eta - ct)[..., None] * m - wi / eta
-    wo = np.where(ok[..., None], wo, np.array([0.0, 0.0, 1.0]))
-    return wo, ok
-
-
 def transmission_jacobian(wi, wo, m, eta):
-    """|dwo / dm| of the refraction wo = refract(wi, m) (Walter 2007 eq. 17 inverted):
+    """|dwo / dm| of the refraction wo = refract_about(wi, m) (Walter 2007 eq. 17 inverted):
     (wi.m + eta wo.m)^2 / (eta^2 |wo.m|)."""
     im, om = dot(wi, m), dot(wo, m)
     return (im + eta * om) ** 2 / (eta * eta * np.maximum(np.abs(om), _TINY))
@@ -178,7 +163,7 @@ class MicrofacetGlass:
 
     def delta_transmission(self, wi):
         """(wo, T): direction and transmittance (..., 3) of the delta transmission: perfect
-        glass, wo = refract(wi, n), T = (1 - F(wi.n)) tint (0 under TIR); the pass-through,
+        glass, wo = refract_about(wi, n), T = (1 - F(wi.n)) tint (0 under TIR); the pass-through,
         wo = -wi, T = tint; zeros for rough glass."""
         wi = np.asarray(wi, dtype=float)
         up = wi[..., 2] > 0.0
@@ -187,7 +172,7 @@ class MicrofacetGlass:
         if not self.mf.delta:
             return -wi, np.zeros(wi.shape)
         n = np.array([0.0, 0.0, 1.0])
-        wo, ok = refract(wi, n, self.eta)
+        wo, ok = refract_about(wi, n, self.eta)
         T = np.where(up & ok, 1.0 - self.F(wi[..., 2]), 0.0)
         return wo, self.tint * T[..., None]
 
@@ -249,8 +234,8 @@ class MicrofacetGlass:
         c = dot(wi, m)
         F = self.F(c)
         is_refl = u[..., 2] < F
-        wo_r = reflect(wi, m)
-        wo_t, ok_t = refract(wi, m, eta)
+        wo_r = reflect_about(wi, m)
+        wo_t, ok_t = refract_about(wi, m, eta)
         wo = np.where(is_refl[..., None], wo_r, wo_t)
         valid = up & (c > 0.0) & (factor > 0.0) & np.where(
             is_refl, wo_r[..., 2] > 0.0, ok_t & (wo_t[..., 2] < 0.0))

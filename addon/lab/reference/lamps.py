@@ -6,6 +6,9 @@ The shader draws its residual's direction from the mixture
 and weights it r cos / p(wo) (Veach 1997, one-sample balance heuristic), so the estimate is
 exact whatever the lamp records say. Records are addon/lamps.py LampRecords (world space); here
 the shading frame is the world frame (n = z, tangent = x), so local and world directions agree.
+(So the OSL's frame changes, sample_lamps_local and lamps_density_local, have no twin here, nor
+its readers of the generated table, lamp_vector, lamp_kind, lamp_u and lamp_v: `extents` and
+the record's fields.)
 
 Shapes: points P and normals (..., 3); directions (..., 3); uniforms (...,).
 """
@@ -14,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...lamps import LampRecord
-from .microfacet import dot, normalize, reflect
+from .bsdf import reflection_pdf
+from .microfacet import dot, normalize, reflect_about
 from .split import eval_native
 
 # osl/lamps.h MFL_GUIDE_FRACTION, MFL_LAMP_MARGIN (tests/test_reference_lamps.py checks they
@@ -25,7 +29,20 @@ GUIDE_FRACTION = 0.5
 MARGIN = 2e-3
 
 
-def cone(rec: LampRecord, P):
+def in_cone(dirs, axis, sin2):
+    """Whether dirs lie in the cone of sin^2(half-angle) sin2 around axis (half-angles below
+    pi/2): sin^2 from the cross product, exact for tiny cones where 1 - cos rounds away."""
+    c = np.cross(dirs, axis)
+    return (dot(dirs, axis) > 0.0) & (np.sum(c * c, axis=-1) <= sin2)
+
+
+def cone_density(th):
+    """The uniform density over a cone of half-angle th: 1 / (2 pi (1 - cos th))."""
+    omc = 2.0 * np.sin(0.5 * np.asarray(th, dtype=float)) ** 2
+    return 1.0 / (2.0 * np.pi * np.maximum(omc, 1e-30))
+
+
+def lamp_cone(rec: LampRecord, P):
     """(axis, 1 - cos, sin^2, valid) of the cone toward the sun or a sphere lamp from P."""
     P = np.asarray(P, dtype=float)
     if rec.kind == "sun":
@@ -101,7 +118,7 @@ def sample_lamp(rec: LampRecord, P, u1, u2):
     P = np.asarray(P, dtype=float)
     u1, u2 = np.broadcast_arrays(np.asarray(u1, dtype=float), np.asarray(u2, dtype=float))
     if rec.kind in ("sun", "sphere"):
-        axis, omc, _, _ = cone(rec, P)
+        axis, omc, _, _ = lamp_cone(rec, P)
         return sample_cone(axis, omc, u1, u2)
     if rec.kind == "ellipse":
         r = np.sqrt(u1)
@@ -117,9 +134,8 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     """p_i(dir) over solid angle (osl lamp_pdf)."""
     P, dirs = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(dirs, dtype=float))
     if rec.kind in ("sun", "sphere"):
-        axis, omc, sin2, valid = cone(rec, P)
-        c = np.cross(dirs, axis)
-        inside = valid & (dot(dirs, axis) > 0.0) & (np.sum(c * c, axis=-1) <= sin2)
+        axis, omc, sin2, valid = lamp_cone(rec, P)
+        inside = valid & in_cone(dirs, axis, sin2)
         return np.where(inside, 1.0 / (2.0 * np.pi * np.where(inside, omc, 1.0)), 0.0)
     n = np.asarray(rec.axis, dtype=float)
     (u, v), c = extents(rec), np.asarray(rec.position, dtype=float)
@@ -134,12 +150,18 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     return np.where(ok, dist * dist / (lamp_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
 
 
-def guide_fraction(records, P, Ng):
-    """(lam, total): GUIDE_FRACTION where some lamp has weight at P, else 0; the weights' sum."""
+def lamps_total_weight(records, P, Ng):
+    """The sum of the lamps' guiding weights at P (...,)."""
     P = np.asarray(P, dtype=float)
     total = np.zeros(P.shape[:-1])
     for rec in records:
         total = total + lamp_weight(rec, P, Ng)
+    return total
+
+
+def guide_fraction(records, P, Ng):
+    """(lam, total): GUIDE_FRACTION where some lamp has weight at P, else 0; the weights' sum."""
+    total = lamps_total_weight(records, P, Ng)
     return np.where(total > 0.0, GUIDE_FRACTION, 0.0), total
 
 
@@ -167,24 +189,10 @@ def sample_lamps(records, P, Ng, u0, u1, u2):
     return out
 
 
-def reflection_pdf(bsdf, wi, m):
-    """The model sampler's density of wo = reflect(wi, m): pdf_m(m) / (4 wi.m) (osl
-    reflection_pdf)."""
-    mf, c = bsdf.mf, dot(wi, m)
-    if bsdf.sampler == "dcos":
-        pdf_m = mf.pdf_dcos(m)
-    elif bsdf.sampler == "vndf":
-        pdf_m = mf.pdf_vndf(wi, m)
-    else:
-        pdf_m = mf.pdf_vcavity(wi, m)
-    ok = (c > 0.0) & (m[..., 2] > 0.0) & (wi[..., 2] > 0.0)
-    return np.where(ok, pdf_m / (4.0 * np.where(ok, c, 1.0)), 0.0)
-
-
 def sample_guided_residual(bsdf, records, P, wi, u, less=None):
     """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
     r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
-    sample_guided_reflection). u: (..., 7) uniforms: 3 for the model's sampler, the choice
+    sample_guided_residual). u: (..., 7) uniforms: 3 for the model's sampler, the choice
     between lamps and model, the lamp, and 2 for the lamp's direction. less(P, wi, Ng, wo):
     what to take off r cos (controls.guided_residual_beside_controls: the lamp controls'
     part)."""
@@ -195,7 +203,7 @@ def sample_guided_residual(bsdf, records, P, wi, u, less=None):
     Ng = np.broadcast_to([0.0, 0.0, 1.0], shape)
     lam, _ = guide_fraction(records, P, Ng)
     m_model, _ = bsdf.sample_normal(wi, u[..., :3])
-    wo = reflect(wi, m_model)
+    wo = reflect_about(wi, m_model)
     if records:
         aimed = u[..., 3] < lam
         wo = np.where(aimed[..., None],

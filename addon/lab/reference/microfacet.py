@@ -1,6 +1,7 @@
-"""Microfacet distributions (GGX, Beckmann; anisotropic), Smith and V-cavity masking, and
-the samplers of microfacet normals. Shaped like pbrt-v4's TrowbridgeReitzDistribution /
-Mitsuba 3's MicrofacetDistribution: one small object holds (distribution, alpha_x, alpha_y).
+"""Microfacet distributions (GGX, Beckmann; anisotropic), Smith and V-cavity masking, the
+samplers of microfacet normals, and mirror reflection and refraction about a normal. Shaped like
+pbrt-v4's TrowbridgeReitzDistribution / Mitsuba 3's MicrofacetDistribution: one small object
+holds (distribution, alpha_x, alpha_y).
 
 Conventions (docs/models.md): local frame n = (0,0,1); directions are unit numpy arrays
 of shape (..., 3) that broadcast; scalar results have shape (...). alpha_x acts along the tangent
@@ -8,7 +9,8 @@ of shape (..., 3) that broadcast; scalar results have shape (...). alpha_x acts 
 D, pdf_* are then 0 (not representable as functions), Lambda is 0 and the samplers return n.
 A single axis below 1e-7 is clamped to 1e-7 (no division by zero).
 
-The twin of this file is osl/microfacet.h: same names, same formulas.
+The twin of this file is osl/microfacet.h: same names, same formulas (there D, lambda_, G1,
+G2 and the samplers take the distribution and alphas that a Microfacet holds here).
 """
 from __future__ import annotations
 
@@ -49,14 +51,37 @@ def broadcast_pair(wi, u):
     return np.broadcast_to(wi, shape), np.broadcast_to(u, shape)
 
 
-def reflect(w, m):
-    """Mirror w about m (both pointing away from the surface): 2 (w.m) m - w."""
+def reflect_about(w, m):
+    """Mirror w about m (both pointing away from the surface): 2 (w.m) m - w. (OSL's own
+    reflect takes the incident direction toward the surface, hence the name in both twins.)"""
     return 2.0 * dot(w, m)[..., None] * m - w
+
+
+def refract_about(wi, m, eta):
+    """Refraction of wi through a facet m (wi.m > 0), eta = n_o / n_i (Walter 2007 eq. 40):
+    wo = (c / eta - sqrt(1 - (1 - c^2) / eta^2)) m - wi / eta, c = wi.m.
+    Returns (wo, ok); ok is False under TIR (wo is then (0, 0, 1), a placeholder)."""
+    wi = np.asarray(wi, dtype=float)
+    m = np.asarray(m, dtype=float)
+    c = dot(wi, m)
+    cos_t2 = 1.0 - (1.0 - c * c) / (eta * eta)
+    ok = cos_t2 > 0.0
+    ct = np.sqrt(np.maximum(cos_t2, 0.0))
+    wo = (c / eta - ct)[..., None] * m - wi / eta
+    wo = np.where(ok[..., None], wo, np.array([0.0, 0.0, 1.0]))
+    return wo, ok
 
 
 def vec(x, y, z):
     x, y, z = np.broadcast_arrays(x, y, z)
     return np.stack([x, y, z], axis=-1).astype(float)
+
+
+def standard_slope_radius2(distribution: str, u):
+    """Squared radius of the slopes of the alpha = 1 distribution from the inverse radial CDF of
+    P22 (Walter 2007 eqs. 28, 35): GGX u / (1 - u), Beckmann -log(1 - u)."""
+    v = np.minimum(u, 1.0 - 2.0 ** -53)
+    return v / (1.0 - v) if distribution == "ggx" else -np.log1p(-v)
 
 
 def beckmann_lambda_of_a(a):
@@ -168,9 +193,7 @@ class Microfacet:
         u1, u2 = np.broadcast_arrays(np.asarray(u1, dtype=float), np.asarray(u2, dtype=float))
         if self.delta:
             return self._normal(u1.shape)
-        v = np.minimum(u1, 1.0 - 2.0 ** -53)
-        r2 = v / (1.0 - v) if self.ggx else -np.log1p(-v)
-        r = np.sqrt(r2)
+        r = np.sqrt(standard_slope_radius2(self.distribution, u1))
         phi = 2.0 * math.pi * u2
         return normalize(vec(-r * np.cos(phi) * self.alpha_x, -r * np.sin(phi) * self.alpha_y,
                               1.0))
@@ -223,7 +246,7 @@ class Microfacet:
         has_phi = sin_t > 0.0
         cos_phi = np.where(has_phi, ws[..., 0] / np.where(has_phi, sin_t, 1.0), 1.0)
         sin_phi = np.where(has_phi, ws[..., 1] / np.where(has_phi, sin_t, 1.0), 0.0)
-        x = _beckmann_visible_slope_x(u1, sin_t / cos_t, cos_t / np.maximum(sin_t, _TINY))
+        x = beckmann_visible_slope_x(u1, sin_t / cos_t, cos_t / np.maximum(sin_t, _TINY))
         y = erfinv(2.0 * u2 - 1.0)
         sx = (cos_phi * x - sin_phi * y) * ax
         sy = (sin_phi * x + cos_phi * y) * ay
@@ -265,7 +288,7 @@ class Microfacet:
         return np.where((s > 0.0) & (wi[..., 2] > 0.0), val, 0.0)
 
 
-def _beckmann_visible_slope_x(u, tan_t, cot_t, steps: int = BECKMANN_NEWTON_STEPS):
+def beckmann_visible_slope_x(u, tan_t, cot_t, steps: int = BECKMANN_NEWTON_STEPS):
     """Solve C(x) = u for the visible-slope CDF of the alpha = 1 Beckmann distribution seen
     from incidence theta (Heitz & d'Eon 2014 sec. 4 eq. 12):
     C(x) = [(1 + erf x)/2 + tan t exp(-x^2) / (2 sqrt pi)] / (1 + Lambda(cot t)) on

@@ -17,7 +17,7 @@ panels graded toward u2 = 1/4 (`_u2_edges`, per mu); for each u2 and mu, u1 = v^
 [0, v_horizon] (the closed-form v where wo meets the horizon; beyond it the integrand is 0) on
 panels graded toward the horizon (`_v_edges`; v makes the slope radius analytic at the pole).
 Cutting at the horizon keeps the integrand smooth (Smith masking), so the rule converges fast.
-The integrand is f(wi, wo(m)) wo.n |dwo/dm| / pdf_dcos(m) with wo = reflect(wi, m),
+The integrand is f(wi, wo(m)) wo.n |dwo/dm| / pdf_dcos(m) with wo = reflect_about(wi, m),
 |dwo/dm| = 4 |wo.m| (Walter 2007 eq. 14), f from `bsdf.eval_specular` (the evaluation formula,
 not the samplers' weights). The Lambertian part is analytic: E_d = albedo,
 first moment (2/3) albedo n. A delta lobe (roughness 0) is exact: E = R(mu),
@@ -28,7 +28,7 @@ Glass (a BSDF with `has_transmission`, addon/lab/reference/glass.py): the moment
 whole sphere, E = integral f |cos_o| dwo and (Vn, Vt) from integral f |cos_o| wo dwo,
 reflection plus transmission (in the single-interface render the refracted ray leaves the
 sphere in direction wo). The transmitted lobe uses the same D cos parametrisation, with
-wo = refract(wi, m), |dwo/dm| = (wi.m + eta wo.m)^2 / (eta^2 |wo.m|), cut at total internal
+wo = refract_about(wi, m), |dwo/dm| = (wi.m + eta wo.m)^2 / (eta^2 |wo.m|), cut at total internal
 reflection and the horizon (`_transmission_rule`); for eta < 1 both lobes get u2 panels at the
 azimuths where those cuts make the line integrals non-smooth (`_u2_edges_glass`), one
 incidence at a time. Perfect glass and the index-matched pass-through are exact. Convergence:
@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .glass import refract, transmission_jacobian
-from .microfacet import dot, reflect
+from .glass import transmission_jacobian
+from .microfacet import dot, reflect_about, refract_about
 
 # Panels of v = sqrt(u1): fractions of [0, v_horizon] and theta levels toward the horizon.
 V_BODY = (0.0,) + tuple(1.0 - 4.0 ** -k for k in range(1, 10))  # GGX tail: 1 - v ~ alpha^2
@@ -215,7 +215,7 @@ def _transmission_rule(mf, mu, s, u2, eta, order):
     transmitted lobe.
 
     Along a line of constant u2 (normals at polar angle theta in the azimuth phi_m) the
-    refraction wo = refract(wi, m) exists and has wi.m > 0 for theta in the window of
+    refraction wo = refract_about(wi, m) exists and has wi.m > 0 for theta in the window of
     `_tir_window` intersected with [0, pi/2): [theta_lo, theta_hi]. At its ends the integrand
     goes to 0 like wi.m (eta > 1) or like 1 - F, a square root (total internal reflection,
     eta < 1). For eta > 1, wo.z < 0 on the whole window (cos_t > (wi.m) / eta); for eta < 1 wo
@@ -277,7 +277,7 @@ def directional_moments(bsdf, mu, order: int = DEFAULT_ORDER, chunk: int = 16):
     reflection plus transmission (wo.z < 0 there, so transmission makes Vn negative).
 
     Transmission: over microfacet normals with the same D cos parametrisation and rule as the
-    reflection, wo = refract(wi, m), |dwo/dm| = (wi.m + eta wo.m)^2 / (eta^2 |wo.m|)
+    reflection, wo = refract_about(wi, m), |dwo/dm| = (wi.m + eta wo.m)^2 / (eta^2 |wo.m|)
     (Walter 2007 eq. 17 inverted; eta = n_o / n_i), integrand f_t |cos_o| |dwo/dm| / pdf_dcos(m)
     with f_t from `eval_transmission`, cut where the refraction fails (total internal
     reflection, wi.m <= 0) or wo crosses the horizon (`_transmission_rule`). For eta < 1
@@ -320,7 +320,7 @@ def directional_moments(bsdf, mu, order: int = DEFAULT_ORDER, chunk: int = 16):
         m = mf.sample_dcos(v * v, u2[..., None])
         pdf = mf.pdf_dcos(m)
         W = np.where(pdf > 0.0, W / np.where(pdf > 0.0, pdf, 1.0), 0.0)
-        wo = reflect(w_in, m)
+        wo = reflect_about(w_in, m)
         f = bsdf.eval_specular(w_in, wo)
         g = W * 4.0 * np.abs(dot(wo, m)) * np.maximum(wo[..., 2], 0.0)
         E[sl] += np.einsum("ijk,ijkc->ic", g, f)
@@ -333,7 +333,7 @@ def directional_moments(bsdf, mu, order: int = DEFAULT_ORDER, chunk: int = 16):
         W = du1 * w2[..., None]
         pdf = mf.pdf_dcos(m)
         W = np.where(pdf > 0.0, W / np.where(pdf > 0.0, pdf, 1.0), 0.0)
-        wo, ok = refract(w_in, m, eta)  # wo = (0, 0, 1) where it fails: f_t = 0 there
+        wo, ok = refract_about(w_in, m, eta)  # wo = (0, 0, 1) where it fails: f_t = 0 there
         f = bsdf.eval_transmission(w_in, wo)
         g = np.where(ok, W * transmission_jacobian(w_in, wo, m, eta), 0.0) \
             * np.maximum(-wo[..., 2], 0.0)

@@ -5,9 +5,10 @@ Accuracy (checked in tests/test_reference_special.py against the standard librar
   `erfcc`), fractional error below 1.2e-7 for every x.
 - `erf`: 1 - erfc for |x| >= 0.5 (absolute error below 1.2e-7 * erfc(|x|) < 6e-8); the Maclaurin
   series (Abramowitz & Stegun 7.1.5, 11 terms) for |x| < 0.5 (relative error below 1e-14).
-- `erfinv`: Giles 2010 "Approximating the erfinv function" (single-precision polynomial; the
-  OSL twin uses the same) refined by Newton steps on erf / erfc (one; four beyond 1 - 1e-6), so the result is limited
-  by erfc: |erf(y) - x| < 5e-8 and erfc(y) within 2e-7 relative of 1 - |x|.
+- `erfinv`: Giles 2010 "Approximating the erfinv function" (single-precision polynomial,
+  `erfinv_giles`, which is what the OSL twin osl/special.h computes) refined by Newton steps
+  on erf / erfc (one; four beyond 1 - 1e-6), so the result is limited by erfc:
+  |erf(y) - x| < 5e-8 and erfc(y) within 2e-7 relative of 1 - |x|.
 - `chi2_sf`: exact regularised upper incomplete gamma Q(k/2, x/2) by series / Lentz continued
   fraction (Numerical Recipes sec. 6.2, gammq), to about 1e-12 relative.
 """

@@ -1,5 +1,5 @@
 """The light-sampled estimator in numpy: a model split into Cycles' native GGX closure and a
-non-negative stochastic residual (the twin of the split in osl/microfacet.h and the Walter
+non-negative stochastic residual (the twin of osl/split.h and of the split in the Walter
 shaders; design and measurements: docs/light-sampling.md).
 
     f(wi, wo) = c(wi) F(wi.h) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
@@ -28,7 +28,7 @@ heuristic and a singular pdf of 1e6, which biases a sharp native lobe beside a d
 Walter reflection picks the residual with probability 1 - c (`residual_probability`): for
 separable masking F (G2 - c G2_hc) = (1 - c) F G1(wo) G2_hc exactly, so the residual's weight
 over 1 - c stays bounded, and the native part's is c / c = 1. Heitz 2016's walk picks with
-q = a / (a + r) (`split_closures` in microfacet.h, `selection_probability` here).
+q = a / (a + r) (`split_closures` in osl/cycles.h, `selection_probability` here).
 
 Glass splits its reflection lobe the same way. Its stochastic part takes the residual
 reflection alone with probability F (1 - c) / 2, else the transmission (weight (1 - F) G2 over
@@ -42,10 +42,10 @@ import math
 
 import numpy as np
 
-from .bsdf import MicrofacetBRDF
+from .bsdf import MicrofacetBRDF, sample_reflection_factor
 from .fresnel import fresnel_conductor, fresnel_dielectric
 from .glass import MicrofacetGlass
-from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect
+from .microfacet import Microfacet, broadcast_pair, dot, normalize, reflect_about
 
 ESTIMATORS = ("light_sampled", "stochastic")
 # Below this alpha (roughness 0.032) the lobe is nearly a mirror: Cycles' near-specular GGX and
@@ -67,7 +67,7 @@ def native_fresnel(bsdf, cos_i):
 # -- Blender 4.x only: a conductor's native part where conductor_bsdf is not exact ------------
 # There Cycles approximates the conductor Fresnel (exact from 5.0: addon/compat.py), so the
 # shader's native part for a conductor is microfacet("ggx") (no Fresnel) times c = F_lo G_lo,
-# F_lo the least conductor Fresnel over the reachable wi.h (osl/microfacet.h
+# F_lo the least conductor Fresnel over the reachable wi.h (osl/split.h
 # conductor_lower_bound), and the residual F G2 - c G2_hc.
 # Golden-section steps for the Fresnel minimum: the bracket shrinks to 0.618^16 = 4.6e-4 of
 # the searched interval, so the value found exceeds the true minimum by ~F'' 3e-8 (F'' the
@@ -89,9 +89,15 @@ def reachable_cos_lo(wi):
     return np.maximum(np.cos(0.25 * math.pi + 0.5 * theta), 0.0)
 
 
+def search_x(t, origin, sign, lo, hi):
+    """x = origin + sign t^2 clamped to [lo, hi]: the cosine wi.h at fresnel_min's search
+    variable t."""
+    return np.clip(origin + sign * t * t, lo, hi)
+
+
 def fresnel_min(F, lo, hi=1.0, origin=None, steps: int = MIN_SEARCH_STEPS):
     """min of a unimodal F(x) over x in [lo, hi], by golden section in t = sqrt(|x - origin|)
-    (the OSL twin runs the same steps): the smallest value visited, times
+    (the OSL twin runs the same steps, with F the conductor's): the smallest value visited, times
     (1 - FRESNEL_MARGIN). `origin` is the critical angle's cosine at one end of the interval
     (default lo), where F has a square-root cusp that t makes smooth. lo, hi, origin (..., 3)."""
     lo = np.asarray(lo, dtype=float)
@@ -101,7 +107,7 @@ def fresnel_min(F, lo, hi=1.0, origin=None, steps: int = MIN_SEARCH_STEPS):
     sign = np.where(np.abs(hi - origin) >= np.abs(lo - origin), 1.0, -1.0)
 
     def G(t):
-        return F(np.clip(origin + sign * t * t, lo, hi))
+        return F(search_x(t, origin, sign, lo, hi))
 
     a = np.sqrt(np.abs(np.where(sign > 0, lo, hi) - origin))
     b = np.sqrt(np.abs(np.where(sign > 0, hi, lo) - origin))
@@ -224,10 +230,9 @@ def sample_residual(bsdf, wi, u):
     """One sample of the residual lobe of a reflection BSDF: (wo, weight), weight =
     r cos / pdf with the model's own sampler (its visible-normal or D cos density)."""
     wi, u = broadcast_pair(wi, u)
-    m, _ = bsdf.sample_normal(wi, u)
-    wo = reflect(wi, m)
+    m, inv = sample_reflection_factor(bsdf, wi, u)
+    wo = reflect_about(wi, m)
     c = dot(wi, m)
-    inv = bsdf.inv_pdf_factor(wi, m)
     valid = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0) & (c > 0.0)
     w = residual_weight_reflection(bsdf, wi, wo, m, np.where(valid, inv, 0.0))
     return wo, np.where(valid[..., None], w, 0.0)

@@ -30,7 +30,7 @@ reaches the opening. wo = rho (d2.x t + d2.y n) - (wi.u) u (pointing away from t
 Normalisation: apex at the origin, opening width 1 (depth 1 / (cot theta_l + cot theta_r)).
 Each bounce multiplies the RGB throughput by the exact Fresnel reflectance at that bounce.
 
-This file deliberately does not use the unfolding (kaleidoscope) of addon/lab/reference/lee.py: it
+This file deliberately does not use the unfolding (kaleidoscope) of addon/lab/reference/lee/: it
 is the independent ground truth the closed form is tested against.
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from .fresnel import fresnel_conductor, fresnel_dielectric
+from .fresnel import FRESNEL_KINDS, fresnel_color
 from .microfacet import Microfacet
 
 GROOVES = ("symmetric", "asymmetric")
@@ -51,15 +51,11 @@ def fresnel_fn(kind: str = "none", ior=1.5, n=(0.166, 0.429, 1.38), k=(3.15, 2.4
     """A callable cos_i (...) -> RGB reflectance (..., 3) at one bounce.
 
     kind: 'none' (F = 1, exactly), 'dielectric' (exact, eta = ior; grey), 'conductor' (exact
-    complex IOR n + ik per RGB channel)."""
-    if kind == "none":
-        return lambda c: np.ones(np.shape(c) + (3,))
-    if kind == "dielectric":
-        return lambda c: np.repeat(fresnel_dielectric(c, ior)[..., None], 3, axis=-1)
-    if kind == "conductor":
-        nn, kk = np.asarray(n, dtype=float), np.asarray(k, dtype=float)
-        return lambda c: fresnel_conductor(np.asarray(c)[..., None], nn, kk)
-    raise ValueError(f"fresnel kind must be none, dielectric or conductor, not {kind!r}")
+    complex IOR n + ik per RGB channel): fresnel.fresnel_color, the one dispatcher."""
+    if kind not in FRESNEL_KINDS:
+        raise ValueError(f"fresnel kind must be none, dielectric or conductor, not {kind!r}")
+    nn, kk = np.asarray(n, dtype=float), np.asarray(k, dtype=float)
+    return lambda c: fresnel_color(kind, c, ior, nn, kk)
 
 
 # -- groove frames --------------------------------------------------------------------------
@@ -89,7 +85,7 @@ class SizeBiasedTable:
     density proportional to D(theta) sin^2(theta) on [0, pi/2), i.e. the slope radius r = tan
     theta size-biased (density r q(r) / E[r]) with respect to the radial slope density q of
     D(m)(m.n) along a line of slope space (docs/lee-asymmetric-grooves.md). Built by the
-    trapezoid rule on a fine grid in theta, independent of lee.py's closed-form sampler."""
+    trapezoid rule on a fine grid in theta, independent of lee/sampler.py's closed-form sampler."""
 
     def __init__(self, mf: Microfacet, n: int = 200001):
         if abs(mf.alpha_x - mf.alpha_y) > 1e-12 * mf.alpha_x:

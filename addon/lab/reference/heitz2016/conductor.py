@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fresnel import fresnel_conductor, fresnel_dielectric
-from ..microfacet import Microfacet, dot, normalize, reflect
+from ..microfacet import Microfacet, dot, normalize, reflect_about
 from .medium import TINY, G1_height, phase_reflection, sample_visible
 from .walk import SmithWalk, rows
 
@@ -51,7 +51,7 @@ class HeitzConductor(SmithWalk):
     def _scatter(self, wi_ev, thr, outside, u, rng):
         m = sample_visible(self.mf, wi_ev, u[:, 1], u[:, 2], rng)
         c = dot(wi_ev, m)
-        return reflect(wi_ev, m), thr * self.F(c), outside
+        return reflect_about(wi_ev, m), thr * self.F(c), outside
 
     def _next_event(self, wi_ev, wo, h, outside):
         """F x phase function x G1(wo, h): the next-event term toward wo (RGB)."""

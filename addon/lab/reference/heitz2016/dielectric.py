@@ -28,13 +28,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..fresnel import fresnel_dielectric
-from ..microfacet import Microfacet, dot, normalize, reflect
+from ..microfacet import Microfacet, dot, normalize, reflect_about
 from .medium import G1_height, beta_function, phase_dielectric, sample_height, sample_visible
 from .walk import MAX_ORDER, SmithWalk, WalkSample, flip, rows
 
 
 def _refract(wi, m, eta):
-    """Walter 2007 eq. 40 with a per-row eta (glass.refract takes a scalar): wi.m > 0,
+    """Walter 2007 eq. 40 with a per-row eta (microfacet.refract_about takes a scalar): wi.m > 0,
     eta = n_t / n_i; returns (wo, ok), ok False under total internal reflection."""
     c = dot(wi, m)
     cos_t2 = 1.0 - (1.0 - c * c) / (eta * eta)
@@ -104,7 +104,7 @@ class HeitzDielectric(SmithWalk):
         refl = u[:, 3] < F
         wt, ok = _refract(wi_ev, m, eta_l)
         refl = refl | ~ok
-        wr = np.where(refl[:, None], reflect(wi_ev, m), wt)
+        wr = np.where(refl[:, None], reflect_about(wi_ev, m), wt)
         return wr, thr, np.where(refl, outside, ~outside)
 
     def _next_event(self, wi_ev, wo, h, outside):

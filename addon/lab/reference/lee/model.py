@@ -27,7 +27,7 @@ class LeeBRDF:
     most at GGX roughness 1 with a conductor; doc sec. 5), and deterministic directional
     moments for the sphere-grid reference (quadrature.tabulate_moments uses
     `directional_moments` when a BSDF has one: the generic quadrature integrates single-facet
-    lobes around reflect(wi, m), which multi-bounce lobes are not). Both evaluations sum
+    lobes around reflect_about(wi, m), which multi-bounce lobes are not). Both evaluations sum
     k = 1 .. kterms, the derived bound (paths beyond carry < 1e-4 of the energy), and are
     reciprocal to rounding.
 

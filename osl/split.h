@@ -1,0 +1,125 @@
+// Twin: addon/lab/reference/split.py (the light-sampled split: native part and residual).
+// Microfacet Lab: the light-sampled split (docs/light-sampling.md):
+//   f = c(wi) F f_ggx + r,   r >= 0,
+// F f_ggx Cycles' native closure (height-correlated Smith GGX with the model's alphas and
+// Fresnel factor F), which Cycles light-samples, and r the model's own stochastic lobe.
+// c = tint G_lo is a lower bound of f / (F f_ggx) over every wo, so r is never negative (Cycles
+// drops negative weights): G_lo the least ratio G2 / G2_hc (height-correlated 1, separable
+// 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99). Which part a sample returns: split_closures
+// (cycles.h).
+#ifndef MFL_SPLIT_H
+#define MFL_SPLIT_H
+
+#include "cycles.h"
+#include "fresnel.h"
+#include "microfacet.h"
+
+// Below this alpha the lobe is nearly a mirror: stay stochastic (split.ALPHA_SPLIT_MIN).
+#define MFL_ALPHA_SPLIT_MIN 1e-3
+
+// ---------------------------------------------------------------------------------------
+// Blender 4.x only (MFL_EXACT_CONDUCTOR 0): Cycles' conductor_bsdf approximates the conductor
+// Fresnel there, so a conductor's native part is microfacet("ggx") times F_lo, the least
+// conductor Fresnel over the reachable wi.h, found by a golden-section search
+// (split.conductor_lower_bound; tests/test_reference_split.py checks it on dense grids).
+#define MFL_MIN_SEARCH_STEPS 16
+#define MFL_FRESNEL_MARGIN 1e-4
+#define MFL_CUSP_K 1.0
+#define MFL_GOLDEN 0.61803398874989485
+
+// Least wi.h over reflected directions: wo on the horizon opposite wi, cos(pi/4 + theta_i/2).
+float reachable_cos_lo(vector wi)
+{
+    return max(cos(0.25 * MFL_PI + 0.5 * acos(clamp(wi[2], -1.0, 1.0))), 0.0);
+}
+
+// cos of the critical angle (0 for eta >= 1): F is a plateau at 1 left of it.
+float critical_cos(float eta) { return sqrt(max(1.0 - eta * eta, 0.0)); }
+
+// x = origin + sign t^2, clamped to [lo, hi]: the cosine wi.h at fresnel_min's search variable t.
+float search_x(float t, float origin, float sign, float lo, float hi)
+{
+    return clamp(origin + sign * t * t, lo, hi);
+}
+
+// Golden-section minimum of the (unimodal) conductor Fresnel factor over x in [lo, hi], searched
+// in t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
+// F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
+// (split.fresnel_min with F the conductor's, the same steps; OSL passes no functions).
+float fresnel_min(float lo, float hi, float origin, float n, float k)
+{
+    float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
+    float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
+    float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
+    float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
+    float f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
+    float f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
+    float best = min(fresnel_conductor(search_x(a, origin, sign, lo, hi), n, k),
+                     fresnel_conductor(search_x(b, origin, sign, lo, hi), n, k));
+    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
+        best = min(best, min(f1, f2));
+        if (f1 < f2) {  // the minimum lies in [a, x2]
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - MFL_GOLDEN * (b - a);
+            f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
+        }
+        else {  // in [x1, b]
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + MFL_GOLDEN * (b - a);
+            f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
+        }
+    }
+    return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
+}
+
+// Least conductor Fresnel over [lo, hi] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
+// has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
+// two sides are searched apart; otherwise one search covers [lo, 1].
+float conductor_min(float lo, float hi, float n, float k)
+{
+    float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
+    float split_at = min(max(lo, xc), hi);
+    float right = fresnel_min(split_at, hi, xc, n, k);
+    if (k <= 0.0 || xc <= lo)
+        return right;
+    return min(right, fresnel_min(lo, split_at, xc, n, k));
+}
+
+// F_lo per channel, the least conductor Fresnel a reflection from wi can meet.
+color conductor_lower_bound(vector wi, color n, color k)
+{
+    float lo = reachable_cos_lo(wi);
+    return color(conductor_min(lo, 1.0, n[0], k[0]), conductor_min(lo, 1.0, n[1], k[1]),
+                 conductor_min(lo, 1.0, n[2], k[2]));
+}
+
+// ---------------------------------------------------------------------------------------
+// The native part.
+
+// c / tint (split.native_factor): G_lo, the least G2 / G2_hc over wo (1 for height-correlated
+// masking, 1 / (1 + Lambda(wi)) for separable). The native closure carries the model's own
+// Fresnel factor (native_ggx), so c needs no Fresnel bound.
+float native_factor(int masking, int dist, vector wi, float ax, float ay)
+{
+    return (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
+}
+
+// Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own
+// Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf with no
+// transmission for a dielectric (the same closed forms; tests/test_reference_split.py),
+// microfacet("ggx") with no Fresnel for none. `ior` is seen from wi's side (cycles_ior).
+closure color native_ggx(int fresnel_type, vector t, float ax, float ay, float ior, color n,
+                         color k)
+{
+    if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
+        return conductor_bsdf(N, t, ax, ay, n, k, "ggx");
+    if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
+        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, cycles_ior(ior), "ggx");
+    return microfacet("ggx", N, t, ax, ay, 0.0, 0);
+}
+
+#endif  // MFL_SPLIT_H
