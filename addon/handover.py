@@ -1,5 +1,5 @@
-"""Hand the scene's lamps to the Microfacet Lab shaders (docs/light-sampling.md, "The
-residual's direct light").
+"""Hand the scene's lamps to the Microfacet Lab shaders: the bpy half of addon/lamps.py
+(docs/light-sampling.md, "The residual's direct light").
 
 `hand_over(scene)` reads the lamps the scene renders (sun, point, spot, area, at the current
 frame) and the world's bright spots (an HDRI's sun, the Sky Texture's sun disc:

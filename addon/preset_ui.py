@@ -1,5 +1,5 @@
-"""Presets in the UI: Material Properties panel (Cycles), "Apply Microfacet Lab preset", and
-"Specialize scene for render" (addon/specialize.py).
+"""Presets in the UI, the bpy half of addon/presets.py: Material Properties panel (Cycles),
+"Apply Microfacet Lab preset", and "Specialize scene for render" (addon/specialize.py).
 
 Apply creates or updates the active object's active material: a material whose Material Output
 is fed by a Microfacet Lab group gets that group node's inputs changed (or its group swapped

@@ -3,6 +3,8 @@
 compilation fails."""
 from __future__ import annotations
 
+import bpy
+
 from . import shaders
 from .catalog import Model
 
@@ -16,8 +18,6 @@ def text_name(model: Model) -> str:
 def ensure_text(model: Model, lamps=()):
     """The text datablock holding the model's OSL source (with the given lamp table), created
     or refreshed."""
-    import bpy
-
     source = shaders.shader_source(model, lamps)
     text = bpy.data.texts.get(text_name(model))
     if text is None:
