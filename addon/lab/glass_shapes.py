@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 import bpy
-import bmesh  # noqa: I001 (bmesh is importable only after bpy)
+import numpy as np
 
 from . import harness
 from .glass_trace import layout
@@ -19,14 +19,36 @@ from .grid import GridLayout
 SEGMENTS, RINGS = 256, 128
 
 
+def uv_sphere(segments: int = SEGMENTS, rings: int = RINGS):
+    """Vertices and faces of a unit UV sphere (a pole at each end, `rings` - 1 rings of
+    `segments` vertices, quads between rings, triangle fans at the poles), wound outward.
+    bmesh.ops.create_uvsphere builds the same tessellation but takes 1.7 s at 256 x 128."""
+    polar = np.pi * np.arange(1, rings) / rings
+    azimuth = 2.0 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.outer(np.sin(polar), np.cos(azimuth)),
+                     np.outer(np.sin(polar), np.sin(azimuth)),
+                     np.repeat(np.cos(polar)[:, None], segments, axis=1)], axis=-1)
+    verts = np.concatenate([[[0.0, 0.0, 1.0]], ring.reshape(-1, 3), [[0.0, 0.0, -1.0]]])
+    top, bottom = 0, len(verts) - 1
+    index = 1 + np.arange((rings - 1) * segments).reshape(rings - 1, segments)
+    after = np.roll(index, -1, axis=1)  # the next vertex of the same ring
+    faces = [(top, index[0, j], after[0, j]) for j in range(segments)]
+    faces += [(index[k, j], index[k + 1, j], after[k + 1, j], after[k, j])
+              for k in range(rings - 2) for j in range(segments)]
+    faces += [(index[-1, j], bottom, after[-1, j]) for j in range(segments)]
+    return verts, faces
+
+
 def add_shape(scene, shape: str, material):
+    verts, faces = uv_sphere()
+    if shape == "bowl":  # the lower half, the equator ring included
+        keep = verts[:, 2] <= 1e-6
+        renumber = np.cumsum(keep) - 1
+        faces = [tuple(renumber[list(f)]) for f in faces if keep[list(f)].all()]
+        verts = verts[keep]
     mesh = bpy.data.meshes.new(shape)
-    bm = bmesh.new()
-    bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=RINGS, radius=1.0)
-    if shape == "bowl":
-        bmesh.ops.delete(bm, geom=[v for v in bm.verts if v.co.z > 1e-6], context="VERTS")
-    bm.to_mesh(mesh)
-    bm.free()
+    mesh.from_pydata(verts.tolist(), [], [tuple(int(i) for i in f) for f in faces])
+    mesh.validate()
     mesh.shade_smooth()
     mesh.materials.append(material)
     obj = bpy.data.objects.new(shape, mesh)
