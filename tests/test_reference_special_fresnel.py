@@ -70,6 +70,27 @@ def test_fresnel_conductor_spot_values():
     assert np.allclose(fresnel_conductor(c, 1.5, 0.0), fresnel_dielectric(c, 1.5), atol=1e-12)
 
 
+def _fresnel_complex(c, n, k):
+    """The Fresnel equations with complex arithmetic (Born & Wolf sec. 14.2; pbrt-v4
+    FrComplex), the independent form the closed form must equal: cos_t = sqrt(1 - s^2/eta^2),
+    r_s = (c - eta cos_t)/(c + eta cos_t), r_p = (eta c - cos_t)/(eta c + cos_t)."""
+    eta = n + 1j * k
+    cos_t = np.sqrt(1.0 - (1.0 - c * c) / (eta * eta))
+    r_s = (c - eta * cos_t) / (c + eta * cos_t)
+    r_p = (eta * c - cos_t) / (eta * c + cos_t)
+    return 0.5 * (np.abs(r_s) ** 2 + np.abs(r_p) ** 2)
+
+
+def test_fresnel_conductor_closed_form_is_the_complex_fresnel_equations():
+    """What this catches: a wrong sign or term in the closed form (the dielectric and normal-
+    incidence checks above see only k = 0 or c = 1)."""
+    c = np.linspace(1e-6, 1.0, 400)[:, None, None]
+    n = np.geomspace(0.01, 50.0, 37)[None, :, None]
+    k = np.concatenate([[0.0], np.geomspace(1e-3, 20.0, 30)])[None, None, :]
+    closed, exact = fresnel_conductor(c, n, k), _fresnel_complex(c, n, k)
+    np.testing.assert_allclose(closed, exact, rtol=1e-9, atol=1e-12)
+
+
 def test_reference_imports_without_bpy():
     """addon.lab.reference loads with numpy alone (no bpy import, no scipy)."""
     import subprocess

@@ -188,7 +188,9 @@ def fresnel_product(fresnel, rho, phi0, theta_v, k, kmax: int, block: int = 16):
     """prod_{j=1..min(k, kmax)} F(rho |sin(phi0 + (j-1) theta_v)|), RGB: the first min(k, kmax)
     bounces get their Fresnel factor, later ones F = 1 (Max Bounces, doc sec. 4). Vectorised
     over `block` bounces at a time, the paths sorted by their count so that the paths still
-    running are a prefix: the cost is the number of factors, not kmax times the paths."""
+    running are a prefix: the cost is the number of factors, not kmax times the paths. The
+    blocks grow from 1 to `block` factors: most paths end after one to three bounces, and a
+    block costs every live path all of its factors."""
     rho, phi0, theta_v = (np.asarray(a, dtype=float) for a in (rho, phi0, theta_v))
     k = np.asarray(k, dtype=float)
     m = np.minimum(np.where(k >= 1.0, k, 0.0), float(kmax)).astype(np.int64)  # NaN: none
@@ -202,17 +204,19 @@ def fresnel_product(fresnel, rho, phi0, theta_v, k, kmax: int, block: int = 16):
     order = np.argsort(-m, kind="stable")
     ms = m[order]
     neg = -ms  # ascending: the count of paths with more than j0 factors is a searchsorted
-    for j0 in range(0, int(ms[0]), block):
+    j0, size = 0, 1
+    while j0 < int(ms[0]):
         live = order[:int(np.searchsorted(neg, -j0, side="left"))]
-        jj = np.arange(j0, j0 + block, dtype=float)
+        jj = np.arange(j0, j0 + size, dtype=float)
         c = np.minimum(rho[live, None] * np.abs(np.sin(phi0[live, None]
                                                         + jj * theta_v[live, None])), 1.0)
         if isinstance(fresnel, FresnelTable):
             out[live] *= fresnel.product(c, ms[:live.size] - j0)
-            continue
-        F = np.asarray(fresnel(c), dtype=float)
-        past = jj[None, :] >= ms[:live.size, None]  # factors beyond the path's own count
-        if past.any():
-            F = np.where(past[..., None], 1.0, F)
-        out[live] *= np.prod(F, axis=1)
+        else:
+            F = np.asarray(fresnel(c), dtype=float)
+            past = jj[None, :] >= ms[:live.size, None]  # factors beyond the path's own count
+            if past.any():
+                F = np.where(past[..., None], 1.0, F)
+            out[live] *= np.prod(F, axis=1)
+        j0, size = j0 + size, min(2 * size, block)
     return out.reshape(shape + (3,))
