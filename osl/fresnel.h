@@ -32,7 +32,9 @@ float fresnel_conductor(float cos_i, float n, float k)
     float t2 = 2.0 * a * c;
     if (t1 + t2 <= 0.0)
         return 1.0;  // grazing on an index-matched medium: 0/0, take the grazing limit (twin)
-    float rs = (t1 - t2) / (t1 + t2);
+    // R_s is a squared modulus: where a = c (an index-matched medium) t1 - t2 cancels to a
+    // few ulps either side of 0, and a negative one would make F negative (twin).
+    float rs = max((t1 - t2) / (t1 + t2), 0.0);
     float t3 = c2 * a2b2 + s2 * s2;
     float t4 = t2 * s2;
     float rp = rs * (t3 - t4) / (t3 + t4);

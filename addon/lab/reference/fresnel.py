@@ -53,7 +53,9 @@ def fresnel_conductor(cos_i, n, k):
     # At exact grazing incidence on an index-matched medium (n = 1, k = 0) R_s is 0/0; take the
     # grazing limit of every other medium, F = 1 (same guard in the OSL twin).
     grazing = t1 + t2 <= 0.0
-    rs = (t1 - t2) / np.where(grazing, 1.0, t1 + t2)
+    # R_s is a squared modulus: where a = c (an index-matched medium) t1 - t2 cancels to a
+    # few ulps either side of 0, and a negative one would make F negative.
+    rs = np.maximum((t1 - t2) / np.where(grazing, 1.0, t1 + t2), 0.0)
     t3 = c2 * a2b2 + s2 * s2
     t4 = t2 * s2
     rp = rs * (t3 - t4) / np.where(t3 + t4 > 0.0, t3 + t4, 1.0)
