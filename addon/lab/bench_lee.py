@@ -27,6 +27,10 @@ import time
 
 import numpy as np
 
+from ..catalog import MODELS
+from .reference import lee, make_bsdf, vgroove as vg
+from .reference.microfacet import Microfacet
+
 FURNACE_ALPHAS = (0.25, 0.5, 0.75, 1.0)
 GOLD = {"fresnel_type": "conductor"}  # catalog default n, k: gold
 # Cook-Torrance offers only conductor/dielectric Fresnel: n = 0.001, k = 100 gives F >= 0.9996.
@@ -209,10 +213,6 @@ def tracer_vs_closed_form(cases=TRACER_CASES, groove: str = "symmetric", n: int 
     - analytic sampler (lee.sample) and brute-force tracer (vgroove.trace): n samples each,
       standard error s in t seconds; time to `target` = t (s / target)^2.
     Also the agreement of the tracer's mean with the reference quadrature, in standard errors."""
-    from ..catalog import MODELS
-    from .reference import lee
-    from .reference import vgroove as vg
-    from .reference.microfacet import Microfacet
 
     model = MODELS["lee_vgroove"]
     gold = vg.fresnel_fn("conductor", n=model.param("n").default, k=model.param("k").default)
@@ -257,10 +257,6 @@ def moments_accuracy(mus=(1.0, 0.5, 0.2, 0.05, 0.01), alphas=(0.09, 1.0),
                      progress=None) -> dict:
     """Max abs difference of (E, Vn, Vt) between the default rules of lee.moments and rules with
     about 8x the nodes (symmetric 384^2 tensor; asymmetric R3 with 8x the points), gold."""
-    from ..catalog import MODELS
-    from .reference import lee
-    from .reference import vgroove as vg
-    from .reference.microfacet import Microfacet
 
     model = MODELS["lee_vgroove"]
     gold = lee.FresnelTable(vg.fresnel_fn("conductor", n=model.param("n").default,
@@ -293,7 +289,6 @@ def max_bounces_agreement(alpha: float = 1.0, max_bounces=(1, 2, 5, 0),
     `n` LeeBRDF.sample draws with its standard error, `closed_form` = lee.albedo(kmax = Max
     Bounces). All three read Max Bounces as the number of bounces that get their Fresnel
     factor (later ones F = 1)."""
-    from .reference import lee, make_bsdf
 
     x, w = np.polynomial.legendre.leggauss(64)
     edges = np.linspace(0.0, 0.5 * math.pi, 201)

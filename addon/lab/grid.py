@@ -18,6 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..catalog import MODELS
+from .reference import make_bsdf
+from .reference.quadrature import moments_at, tabulate_moments
+
 VIEW = np.array([0.0, 0.0, 1.0])
 
 
@@ -234,10 +238,7 @@ def reference_tables(specs: list) -> list:
     model's evaluation formula (addon/lab/reference/quadrature.py), computed once per process for
     each model and set of values (glass tables take seconds) and kept on disk between runs
     (table_cache)."""
-    from ..catalog import MODELS
     from . import table_cache
-    from .reference import make_bsdf
-    from .reference.quadrature import tabulate_moments
 
     tables = []
     for spec in specs:
@@ -258,8 +259,6 @@ def reference_tables(specs: list) -> list:
 
 
 def reference_grid_image(layout: GridLayout, specs: list, env: Environment) -> np.ndarray:
-    from .reference.quadrature import moments_at
-
     return reference_image(layout, reference_tables(specs), env, moments_at)
 
 

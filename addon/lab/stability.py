@@ -28,6 +28,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..catalog import COLOR, ENUM, MODELS
+from ..shaders import OSL_DIR
+from .grid import sidak_z
+from .reference import make_bsdf
 
 NAN = float("nan")
 ALPHA_DELTA_ROUGHNESS = math.sqrt(1e-7)  # roughness whose alpha is the delta threshold
@@ -315,9 +318,7 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
     `factory(model_id, values)` builds the BSDF (default: the numpy reference's make_bsdf).
     A combination taking over `combo_seconds` is stopped and listed (a stiff input that is
     slow); a model stops after `model_seconds` (the combinations left out are counted)."""
-    from .reference import make_bsdf
-
-    make_bsdf = factory or make_bsdf
+    build = factory or make_bsdf
 
     rng = np.random.default_rng(seed)
     wis = incident_directions()
@@ -336,8 +337,6 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
     for model_id in (models or list(MODELS)):
         plan[model_id] = parameter_combos(model_id, max_combos, roughness)[::stride]
     n_albedo_tests = sum(len(c) for c in plan.values()) * len(albedo_wi)
-    from .grid import sidak_z
-
     z_crit = max(sidak_z(n_albedo_tests * 3, 1e-3), 4.0)
     out = {}
     total = ModelSweep("all models")
@@ -345,7 +344,7 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
         rec = ModelSweep(model_id)
         start = time.perf_counter()
         try:
-            make_bsdf(model_id, {})
+            build(model_id, {})
         except Exception as exc:  # noqa: BLE001 - a model without a numpy twin yet
             rec.skipped = f"no numpy reference ({type(exc).__name__}: {exc})"
             out[model_id] = rec
@@ -356,7 +355,7 @@ def numpy_sweep(max_combos: int = MAX_COMBOS, albedo_samples: int = 1024, stride
                 break
             if progress and ci % 500 == 0:
                 progress(f"numpy sweep {model_id}: combination {ci + 1}/{len(combos)}")
-            bsdf = make_bsdf(model_id, values)
+            bsdf = build(model_id, values)
             rec.combos += 1
             with np.errstate(all="ignore"):
                 try:
@@ -390,8 +389,6 @@ STRESS_ETA = (0.0, 0.1, 1.0 - 1e-6, 1.0, 1.0 + 1e-6, 10.0, 100.0, NAN, -3.0)
 
 def osl_models() -> list:
     """Catalog models whose OSL source exists (a model can be catalogued before its shader)."""
-    from ..shaders import OSL_DIR
-
     return [m for m, model in MODELS.items() if (OSL_DIR / f"{model.shader}.osl").exists()]
 
 

@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..grid import SphereSpec
+from ..reference import make_bsdf
+
 THETA_I = 60.0
 LOBE_ROUGHNESS = (0.5, 1.0)
 RENDER_ROUGHNESS = (0.3, 0.6, 1.0)
@@ -38,7 +41,6 @@ def _in_plane(theta_deg):
 def lobe_slices(walks: int, step: float, rng) -> dict:
     """f |cos_o| over theta_o in [-85, 85] degrees (negative: the mirror side, wo.x < 0; +60 is
     wo = wi) for each model and roughness, RGB, with standard errors (0 for closed forms)."""
-    from ..reference import make_bsdf
 
     thetas = np.arange(-85.0, 85.0 + 1e-9, step)
     wo = _in_plane(thetas)
@@ -67,8 +69,6 @@ def retro_ratio(theta_o, f_cos) -> float:
 
 
 def _row_specs(model_id, values, label):
-    from ..grid import SphereSpec
-
     return [SphereSpec(model_id, {**values, "roughness": r}, f"{label} r={r}")
             for r in RENDER_ROUGHNESS]
 

@@ -8,6 +8,8 @@ import time
 import numpy as np
 
 from .. import grid
+from ..reference import make_bsdf
+from ..reference.quadrature import moments_at
 from .references import ReferenceTables
 from .rows import specs_for
 
@@ -20,9 +22,7 @@ def compute(cfg, rows, tables, progress, notes, out) -> dict:
 def reference_cost(cfg, rows, progress) -> list:
     """Time and accuracy of the gradient reference image of one grid (one row per model
     variant) against the quadrature order, relative to order `ref_high_order`."""
-    from ..reference.quadrature import moments_at
 
-    from ..reference import make_bsdf
 
     seen, specs = set(), []
     for row in rows:

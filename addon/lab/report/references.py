@@ -7,6 +7,9 @@ import numpy as np
 from .. import grid
 from .config import AREA_LAMP, CONE_LIGHTS, LAMP_ENVS, POINT_LAMP, SUN_WORLD
 from .lights import area_lamp_axes, hdri_spot, point_radiance, sun_unit
+from ...world_spots import equirect_direction
+from ..reference import make_bsdf
+from ..reference.quadrature import moments_at, tabulate_moments
 
 
 def _table_key(spec):
@@ -25,9 +28,6 @@ class ReferenceTables:
         self.cache = {}
 
     def get(self, spec):
-        from ..reference import make_bsdf
-        from ..reference.quadrature import tabulate_moments
-
         key = _table_key(spec)
         if key not in self.cache:
             bsdf = make_bsdf(spec.model_id, spec.values)
@@ -89,7 +89,6 @@ def _light_term(layout, specs, nodes_of):
     """Per pixel (H, W, 3): the integral of f |wo.n| L over a light; `nodes_of(sel, points,
     normals)` gives that light's directions and solid-angle weights times radiance for the
     pixels sel (surface points and normals of those pixels; sphere centres at z = 0)."""
-    from ..reference import make_bsdf
 
     index, normal, mu = layout.pixel_geometry()
     tangent = grid.tangent_toward_view(normal)
@@ -164,7 +163,6 @@ def equirect_cell_nodes(radiance, n: int):
     equirectangular world image (H, W) seen with Closest interpolation (each pixel a cell of
     constant radiance, addon/world_spots.py conventions): Gauss-Legendre in cos(theta) and in
     the azimuth, n x n per cell, exact measure dphi dcos(theta). Returns (K, 3), (K,)."""
-    from ...world_spots import equirect_direction
 
     radiance = np.asarray(radiance, dtype=float)
     height, width = radiance.shape
@@ -194,7 +192,6 @@ def reference_image(layout, specs, env_key, tables: ReferenceTables, sun=None, n
     """The reference of a grid under 'white', 'gradient', a cone light of CONE_LIGHTS (then
     `sun` = (radiance, half_angle)) or the point lamp; returns (image, the lamp quadrature's
     error estimate or 0)."""
-    from ..reference.quadrature import moments_at
 
     tabs = [None if s is None else tables.get(s) for s in specs]
     if env_key not in LAMP_ENVS:

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import grid, stability
+from ..reference import make_bsdf
+from ..reference.quadrature import tabulate_moments
 from ...catalog import MODELS
 from .config import GOLD
 
@@ -64,7 +66,6 @@ def self_referenced(row) -> bool:
 
 def reference_available(model_id: str) -> str:
     """'' when the numpy twin and the OSL shader exist, else why not."""
-    from ..reference import make_bsdf
 
     if model_id not in stability.osl_models():
         return "no OSL shader yet"
@@ -73,7 +74,6 @@ def reference_available(model_id: str) -> str:
     except Exception as exc:  # noqa: BLE001
         return f"no numpy reference yet ({type(exc).__name__}: {exc})"
     # The reference image needs the moment tables: probe them cheaply, with a time limit.
-    from ..reference.quadrature import tabulate_moments
 
     try:
         with stability._time_limit(5.0):
@@ -93,7 +93,6 @@ def eval_is_fast(model_id: str, values: dict, limit: float = 3.0) -> bool:
     0.63 s, asymmetric 1.9 s. (A limit of 0.5 s left Lee's rows out of every lamp light on
     that machine and kept them on a faster one: the limit only guards against a model whose
     lamp reference would take hours.)"""
-    from ..reference import make_bsdf
 
     if getattr(make_bsdf(model_id, values), "stochastic_eval", False):
         return False

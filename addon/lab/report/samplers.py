@@ -8,6 +8,8 @@ import math
 import numpy as np
 
 from .. import grid, stability
+from ..reference import make_bsdf
+from ..reference.quadrature import moments_at
 from ...catalog import MODELS
 from .config import MU_MIN_RMSE
 from .plotting import _plt, to_display
@@ -62,7 +64,6 @@ def weight_stats(bsdf, thetas, n_samples, rng) -> dict:
 def sampler_study(cfg, progress) -> dict:
     """Per model with a sampler switch: variance and maximum of the sample weight (F ~ 1)
     against incidence angle, per sampler and roughness."""
-    from ..reference import make_bsdf
 
     rng = np.random.default_rng(cfg.seed + 11)
     out = {}
@@ -87,7 +88,6 @@ def fireflies(cfg, progress, out_dir) -> dict:
     """Rough spheres (roughness 0.6; reflection with F = 1, and glass) at 4 samples with D cos
     and with visible normals, beside the reference: the rim is the grazing view."""
     from .. import harness
-    from ..reference.quadrature import moments_at
 
     specs = [grid.SphereSpec(model, {**values, "sampler": s}, f"{label}, {s}")
              for label, model, values in FIREFLY_ROWS for s in FIREFLY_SAMPLERS]
