@@ -24,7 +24,7 @@ COMPAT ?= 4.2 4.5 5.0
 # and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
-.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace clean
+.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace fallback-fit clean
 
 venv:
 	@$(VENV_SH) requirements.txt >/dev/null
@@ -65,6 +65,10 @@ thumbnails: venv
 
 lee-furnace: venv
 	$(PY) scripts/lee_furnace.py
+
+# Lee's native branch's correction lobe, fitted to the numpy reference (a few minutes).
+fallback-fit: venv
+	$(PY) scripts/fallback_fit.py
 
 clean:
 	rm -rf out report dist .pytest_cache

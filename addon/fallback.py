@@ -21,8 +21,16 @@ measured by `make report` (section "fallback").
 """
 from __future__ import annotations
 
+import json
+from functools import lru_cache
+from pathlib import Path
+
 from . import compat
 from .catalog import MODELS, Model
+
+# Lee's correction lobe: polynomial coefficients fitted to the numpy reference by
+# addon/lab/fallback_fit.py (`make fallback-fit`), read here as data.
+FIT_PATH = Path(__file__).resolve().with_name("fallback_fit.json")
 
 SWITCH_NODE_NAME = "Microfacet Lab: OSL or native"
 NATIVE_FRAME_NAME = "Microfacet Lab: native branch"
@@ -33,7 +41,8 @@ NATIVE = {
     "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
                          "Beckmann with Height-correlated masking (metals from Blender 5.0)",
     "walter_glass": "Glass BSDF: exact for Height-correlated masking",
-    "lee_vgroove": "Metallic or Glossy with Multiscatter GGX (Beckmann: single scattering)",
+    "lee_vgroove": "Metallic or Glossy with Multiscatter GGX (Beckmann: single scattering), "
+                   "plus a Glossy lobe fitted to the grooves' extra bounces",
     "heitz2016": "Metallic, Glass or Glossy with Multiscatter GGX (Beckmann: single scattering)",
 }
 
@@ -98,6 +107,24 @@ class Branch:
         self.link(b, node.inputs["B_Vector"] if "B_Vector" in node.inputs else node.inputs[5])
         return _output(node, "VECTOR")
 
+    def math(self, operation: str, *inputs):
+        node = self.node("ShaderNodeMath", operation=operation)
+        for socket, value in zip(node.inputs, inputs):
+            self.link(value, socket)
+        return node.outputs[0]
+
+    def vector_math(self, operation: str, *inputs):
+        node = self.node("ShaderNodeVectorMath", operation=operation)
+        for socket, value in zip(node.inputs, inputs):
+            self.link(value, socket)
+        return node.outputs[0]
+
+    def facing(self):
+        """1 - |n.wi| (Layer Weight's Facing at Blend 0.5)."""
+        node = self.node("ShaderNodeLayerWeight")
+        node.inputs["Blend"].default_value = 0.5
+        return node.outputs["Facing"]
+
     def gray(self, value):
         """A vector (v, v, v) from a float socket."""
         node = self.node("ShaderNodeCombineXYZ")
@@ -135,18 +162,12 @@ def _output(node, socket_type: str):
 def f0_conductor(b: Branch, n, k):
     """Reflectance at normal incidence of a conductor, ((n-1)^2 + k^2) / ((n+1)^2 + k^2)
     (Born & Wolf), per channel: the Principled metal's Base Color before Blender 4.3."""
-    def vmath(op, a, c):
-        node = b.node("ShaderNodeVectorMath", operation=op)
-        b.link(a, node.inputs[0])
-        b.link(c, node.inputs[1])
-        return node.outputs[0]
-
-    k2 = vmath("MULTIPLY", k, k)
-    minus = vmath("SUBTRACT", n, (1.0, 1.0, 1.0))
-    plus = vmath("ADD", n, (1.0, 1.0, 1.0))
-    num = vmath("ADD", vmath("MULTIPLY", minus, minus), k2)
-    den = vmath("ADD", vmath("MULTIPLY", plus, plus), k2)
-    return vmath("DIVIDE", num, den)
+    k2 = b.vector_math("MULTIPLY", k, k)
+    minus = b.vector_math("SUBTRACT", n, (1.0, 1.0, 1.0))
+    plus = b.vector_math("ADD", n, (1.0, 1.0, 1.0))
+    num = b.vector_math("ADD", b.vector_math("MULTIPLY", minus, minus), k2)
+    den = b.vector_math("ADD", b.vector_math("MULTIPLY", plus, plus), k2)
+    return b.vector_math("DIVIDE", num, den)
 
 
 def metal(b: Branch, distribution: str, n, k, roughness, anisotropy=0.0):
@@ -168,10 +189,16 @@ def metal(b: Branch, distribution: str, n, k, roughness, anisotropy=0.0):
 def fresnel_metal(b: Branch, distribution: str, anisotropy=0.0):
     """The model's Fresnel as a metal: Conductor reads N and K, Dielectric is a conductor with
     n = IOR and k = 0 (the same Fresnel for real n). Fresnel None is not handled here."""
+    n, k = metal_indices(b)
+    return metal(b, distribution, n, k, b.src("roughness"), anisotropy)
+
+
+def metal_indices(b: Branch):
+    """(n, k) of the model's Fresnel as a conductor: Dielectric is n = IOR, k = 0."""
     conductor = b.is_item("fresnel_type", "conductor")
     n = b.mix_vector(conductor, b.gray(b.src("ior")), b.src("n"))
     k = b.mix_vector(conductor, (0.0, 0.0, 0.0), b.src("k"))
-    return metal(b, distribution, n, k, b.src("roughness"), anisotropy)
+    return n, k
 
 
 def tinted(b: Branch, shader):
@@ -219,8 +246,54 @@ def walter_glass(b: Branch):
 
 
 def lee_vgroove(b: Branch):
-    # Cycles' multiscatter GGX keeps a rough metal's energy, as the grooves' bounces do.
-    return b.by_distribution(lambda d: reflection(b, d), ggx="MULTI_GGX")
+    # Cycles' multiscatter GGX keeps a rough metal's energy, as the grooves' bounces do; the
+    # correction lobe adds what the later bounces keep where the Fresnel reflectance is low.
+    return b.by_distribution(lambda d: b.add_shader(reflection(b, d), lee_correction(b, d)),
+                             ggx="MULTI_GGX")
+
+
+@lru_cache(maxsize=None)
+def fit() -> dict:
+    """The fitted correction (FIT_PATH), read once."""
+    return json.loads(FIT_PATH.read_text(encoding="utf-8"))
+
+
+def lee_correction(b: Branch, distribution: str):
+    """A single-scattering Glossy BSDF of colour max(C(r, x, F0), 0) times the tint, C the
+    polynomial fitted for the distribution and groove shape (addon/lab/fallback_fit.py)."""
+    dist = "beckmann" if distribution == "BECKMANN" else "ggx"
+    n, k = metal_indices(b)
+    f0 = b.mix_vector(b.is_item("fresnel_type", "none"), f0_conductor(b, n, k), (1.0, 1.0, 1.0))
+    x = b.facing()
+    colours = [polynomial_color(b, fit()["variants"][f"{dist}/{groove}"]["coefficients"], x, f0)
+               for groove in b.model.param("groove").items]
+    colour = b.mix_vector(b.is_item("groove", "asymmetric"), *colours)
+    tinted_colour = b.vector_math("MULTIPLY", colour, b.src("base_color"))
+    return b.bsdf("ShaderNodeBsdfGlossy", dist.upper(), Color=tinted_colour,
+                  Roughness=b.src("roughness"))
+
+
+def polynomial_color(b: Branch, coefficients, x, f0):
+    """max(sum_ijk c_ijk r^i x^j F0^k, 0) per channel, by Horner's rule in r, then x (scalars),
+    then F0 (vectors); the terms' order is fit()["terms"]."""
+    terms = [tuple(t) for t in fit()["terms"]]
+    c = dict(zip(terms, coefficients))
+    top_i, top_j, top_k = (max(t[axis] for t in terms) for axis in range(3))
+
+    def horner(top, coefficient, variable, op="MULTIPLY_ADD"):
+        value = coefficient(top)
+        for power in range(top - 1, -1, -1):
+            value = b.math(op, value, variable, coefficient(power))
+        return value
+
+    def s_k(k):
+        return horner(top_j, lambda j: horner(top_i, lambda i: c[(i, j, k)], b.src("roughness")),
+                      x)
+
+    value = b.gray(s_k(top_k))
+    for k in range(top_k - 1, -1, -1):
+        value = b.vector_math("MULTIPLY_ADD", value, f0, b.gray(s_k(k)))
+    return b.vector_math("MAXIMUM", value, (0.0, 0.0, 0.0))
 
 
 def heitz2016(b: Branch):

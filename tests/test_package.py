@@ -105,6 +105,10 @@ def test_runtime_modules_are_the_addon_without_the_lab():
     assert "addon/specialize.py" in mods
 
 
+# The data files the add-on reads at run time.
+ADDON_DATA = {"addon/fallback_fit.json"}
+
+
 def test_zip_contents(package):
     assert package.name == f"{EXT_ID}-{build_package.manifest(ROOT)['version']}.zip"
     with zipfile.ZipFile(package) as zf:
@@ -127,8 +131,9 @@ def test_zip_contents(package):
         assert "__pycache__" not in name and not name.endswith((".pyc", ".pyo")), name
         assert not any(part.startswith(".") for part in name.split("/")), name
         if top == "addon":
-            assert name.endswith(".py"), f"non-Python file under addon/: {name}"
+            assert name.endswith(".py") or name in ADDON_DATA, f"unexpected under addon/: {name}"
     assert {"README.md", "LICENSE"} <= files
+    assert ADDON_DATA <= files
 
 
 def test_license_is_the_gpl3_the_manifest_declares():

@@ -49,3 +49,16 @@ def without_branch(make):
                 node.inputs[p.label].default_value = values[p.id]
         return material
     return wrapped
+
+
+def correction_material(values: dict, distribution: str = "MULTI_GGX"):
+    """A callable making a material of Lee's correction lobe alone (fallback.lee_correction),
+    for catalog `values`; `distribution` as the branch passes it (MULTI_GGX or BECKMANN)."""
+    model = MODELS["lee_vgroove"]
+
+    def make():
+        material, tree, output = harness.new_material("correction")
+        branch = fallback.Branch(tree, model, fallback.constant_sources(model, values))
+        tree.links.new(fallback.lee_correction(branch, distribution), output.inputs["Surface"])
+        return material
+    return make

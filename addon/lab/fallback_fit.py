@@ -1,0 +1,264 @@
+"""The correction lobe of Lee's native branch, fitted to the numpy reference (`make fallback-fit`).
+
+Without OSL, Lee's V-grooves render as Cycles' Metallic BSDF (Multiscatter GGX; Beckmann has no
+multiscatter variant in Cycles, so single scattering) or, for Fresnel None, a Glossy BSDF
+(addon/fallback.py). Cycles' energy compensation (Kulla & Conty 2017, "Revisiting physically
+based shading at Imageworks", appendix) keeps a white metal's energy, as the grooves do, but a
+groove's later bounces keep more light where the Fresnel reflectance is low: on gold's blue
+channel at roughness 0.7 Lee's albedo is 27% above the native one at grazing incidence. The
+native branch therefore adds a correction lobe, a single-scattering Glossy BSDF with the same
+distribution and roughness, whose colour
+
+    C(r, x, F0) = sum_ijk c_ijk r^i x^j F0^k,   x = 1 - n.wi (Layer Weight's Facing),
+                                                 F0 = the channel's reflectance at normal incidence
+
+is fitted here by weighted least squares so that native + correction has the model's directional
+albedo: E_native + E_1 max(C, 0) = E_lee, with E_1 the single-scattering albedo for F = 1, and
+the relative error as the residual. One polynomial per distribution and groove shape; the
+training set is the presets' metals, four dielectrics and F = 1 over roughness 0.05-1.
+
+The native albedo is Cycles' closure in numpy: single scattering from the Walter reference
+(Cycles' GGX and Beckmann with Height-correlated masking are the same BSDF, exact conductor
+Fresnel from Blender 5.0), times Cycles' energy compensation for Multiscatter GGX,
+1 + F_ms (1 - E) / E with F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)) (Kulla & Conty, eq. in
+the appendix, one F_ss cancelled), where Cycles estimates a conductor's average Fresnel F_ss from
+an F82 fit to F(1) and F(1/7) (Hoffman 2019, "Fresnel equations considered harmful") and reads
+E and E_avg from 32-point tables (here: exact quadrature, so the model is a little sharper than
+Cycles). Measured against renders by `make report` (section "fallback").
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .. import fallback, presets
+from ..catalog import MODELS
+from .reference import make_bsdf, quadrature
+from .reference.fresnel import fresnel_conductor
+
+MODEL = MODELS["lee_vgroove"]
+ORDERS = {"roughness": 3, "facing": 3, "f0": 2}  # highest power of r, x, F0
+TERMS = [(i, j, k) for i in range(ORDERS["roughness"] + 1) for j in range(ORDERS["facing"] + 1)
+         for k in range(ORDERS["f0"] + 1)]
+ROUGHNESS = tuple(np.round(np.r_[0.05, np.arange(0.1, 1.01, 0.1)], 2))
+MU, _ = np.polynomial.legendre.leggauss(12)
+MU = tuple(0.5 * (MU + 1.0))
+DIELECTRIC_IORS = (1.33, 1.5168, 1.8, 2.42)
+WHITE = {"fresnel_type": "none"}
+
+
+# -- Cycles' native closures in numpy ----------------------------------------------------------
+# Moments are (E, Vn, Vt), each (len(mu), 3): albedo and the reflected light's first moment
+# along n and toward wi's tangent (reference/quadrature.py).
+def single_moments(distribution: str, r: float, mu, fresnel: str = "none", n=(1, 1, 1),
+                   k=(0, 0, 0)):
+    """Single-scattering GGX or Beckmann with Height-correlated masking (Walter 2007; Cycles'
+    Glossy and Metallic BSDFs)."""
+    bsdf = make_bsdf("walter_reflection", {
+        "roughness": r, "distribution": distribution, "masking": "height_correlated",
+        "fresnel_type": fresnel, "n": tuple(n), "k": tuple(k)})
+    return np.stack(quadrature.directional_moments(bsdf, np.asarray(mu, dtype=float)))
+
+
+def single_albedo(distribution: str, r: float, mu):
+    """E_1(mu) (len(mu), 3): the albedo for F = 1."""
+    return single_moments(distribution, r, mu)[0]
+
+
+def average_albedo(distribution: str, r: float, order: int = 32) -> float:
+    """E_avg = 2 integral_0^1 E_1(mu) mu dmu (Gauss-Legendre)."""
+    x, w = np.polynomial.legendre.leggauss(order)
+    mu = 0.5 * (x + 1.0)
+    return float(np.sum(w * mu * single_albedo(distribution, r, mu)[:, 0]))
+
+
+def fss_conductor(n, k):
+    """Cycles' average Fresnel of a conductor: the F82 model (F0, and B from F at cos = 1/7)
+    integrated, F_ss = F0 + (1 - F0) / 21 - B / 126, clamped to [0, 1]."""
+    n, k = np.asarray(n, dtype=float), np.asarray(k, dtype=float)
+    f0, f82 = fresnel_conductor(1.0, n, k), fresnel_conductor(1.0 / 7.0, n, k)
+    f5 = (6.0 / 7.0) ** 5
+    b = 7.0 / (f5 * 6.0 / 7.0) * (f0 + (1.0 - f0) * f5 - f82)
+    return np.clip(f0 + (1.0 - f0) / 21.0 - b / 126.0, 0.0, 1.0)
+
+
+def native_moments(distribution: str, r: float, mu, material: dict):
+    """Lee's native branch without its correction (addon/fallback.py): Metallic (n, k) or
+    Glossy (F = 1), Multiscatter GGX or single-scattering Beckmann. Cycles' energy
+    compensation scales the whole lobe by a factor of mu alone."""
+    if material["fresnel_type"] == "none":
+        moments, f_ss = single_moments(distribution, r, mu), 1.0
+    else:
+        n, k = conductor_of(material)
+        moments, f_ss = single_moments(distribution, r, mu, "conductor", n, k), fss_conductor(n, k)
+    if distribution != "ggx":
+        return moments
+    e_1 = single_albedo("ggx", r, mu)[:, :1]
+    e_avg = average_albedo("ggx", r)
+    f_ms = f_ss * e_avg / (1.0 - f_ss * (1.0 - e_avg))
+    return moments * (1.0 + f_ms * (1.0 - e_1) / e_1)
+
+
+def conductor_of(material: dict):
+    """(n, k) of the Metallic BSDF the branch uses: a dielectric is a conductor with k = 0."""
+    if material["fresnel_type"] == "dielectric":
+        return (material["ior"],) * 3, (0.0, 0.0, 0.0)
+    return tuple(material["n"]), tuple(material["k"])
+
+
+def f0_of(material: dict) -> np.ndarray:
+    if material["fresnel_type"] == "none":
+        return np.ones(3)
+    n, k = conductor_of(material)
+    return fresnel_conductor(1.0, np.asarray(n), np.asarray(k))
+
+
+def lee_moments(variant: tuple, r: float, mu, material: dict):
+    distribution, groove = variant
+    values = dict(material, roughness=r, distribution=distribution, groove=groove)
+    return np.stack(make_bsdf("lee_vgroove", values).directional_moments(np.asarray(mu)))
+
+
+# -- the polynomial ------------------------------------------------------------------------------
+def basis(r, x, f0, terms=TERMS) -> np.ndarray:
+    r, x, f0 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (r, x, f0)))
+    return np.stack([r ** i * x ** j * f0 ** k for i, j, k in terms], axis=-1)
+
+
+def correction(coefficients, r, x, f0, terms=TERMS):
+    """C(r, x, F0) before the clamp at 0: what fallback.lee_correction builds in nodes."""
+    return basis(r, x, f0, terms) @ np.asarray(coefficients, dtype=float)
+
+
+def samples(variant, r, material, mu=MU):
+    """Arrays over (mu, channel): r, x, F0; the moments (3, ...) of Lee, of the native branch
+    and of the single-scattering lobe with F = 1."""
+    mu = np.asarray(mu, dtype=float)
+    lee = lee_moments(variant, r, mu, material)
+    shape = lee.shape[1:]
+    return {"r": np.full(shape, r), "x": np.broadcast_to((1.0 - mu)[:, None], shape),
+            "f0": np.broadcast_to(f0_of(material), shape), "lee": lee,
+            "native": native_moments(variant[0], r, mu, material),
+            "single": single_moments(variant[0], r, mu)}
+
+
+def branch_moments(s: dict, coefficients=None):
+    """The native branch's moments, with the correction lobe if coefficients are given."""
+    if coefficients is None:
+        return s["native"]
+    c = np.maximum(correction(coefficients, s["r"], s["x"], s["f0"]), 0.0)
+    return s["native"] + s["single"] * c
+
+
+def errors(s: dict, coefficients=None) -> np.ndarray:
+    """Relative albedo error of the branch against Lee."""
+    return branch_moments(s, coefficients)[0] / s["lee"][0] - 1.0
+
+
+def angle(moments):
+    """Angle in degrees from the normal of the mean direction of the reflected light, (Vn, Vt)
+    / E (negative: toward the mirror direction)."""
+    return np.degrees(np.arctan2(moments[2], moments[1]))
+
+
+def lobe_errors(s: dict, coefficients=None) -> np.ndarray:
+    """Angle in degrees between the mean directions of the light the branch and Lee reflect:
+    how far the highlight moves."""
+    return np.abs(angle(branch_moments(s, coefficients)) - angle(s["lee"]))
+
+
+def training_materials() -> list[dict]:
+    metals, seen = [], set()
+    for p in sorted(presets.load_all().values(), key=lambda p: p.id):
+        v = p.params
+        if v.get("fresnel_type") == "conductor" and (tuple(v["n"]), tuple(v["k"])) not in seen:
+            seen.add((tuple(v["n"]), tuple(v["k"])))
+            metals.append({"fresnel_type": "conductor", "n": list(v["n"]), "k": list(v["k"])})
+    dielectrics = [{"fresnel_type": "dielectric", "ior": ior} for ior in DIELECTRIC_IORS]
+    return metals + dielectrics + [WHITE]
+
+
+def stack(many: list[dict]) -> dict:
+    """Samples of many (roughness, material) pairs as flat arrays (moments: (3, N))."""
+    def flat(a):
+        return a.reshape(3, -1) if a.ndim == 3 else a.ravel()
+    return {key: np.concatenate([flat(s[key]) for s in many], axis=-1) for key in many[0]}
+
+
+def fit(s: dict) -> np.ndarray:
+    """Least squares of the relative error: (E_1 C - (E_lee - E_native)) / E_lee."""
+    lee, native, single = s["lee"][0], s["native"][0], s["single"][0]
+    a = basis(s["r"], s["x"], s["f0"]) * (single / lee)[:, None]
+    b = (lee - native) / lee
+    coefficients, *_ = np.linalg.lstsq(a, b, rcond=None)
+    return coefficients
+
+
+def summary(err: np.ndarray) -> dict:
+    return {"worst": float(np.abs(err).max()), "mean": float(np.abs(err).mean())}
+
+
+def report(s: dict, coefficients) -> dict:
+    """Albedo (relative) and lobe (degrees) errors without and with the correction."""
+    return {"before": summary(errors(s)), "after": summary(errors(s, coefficients)),
+            "lobe_before": summary(lobe_errors(s)),
+            "lobe_after": summary(lobe_errors(s, coefficients))}
+
+
+def preset_samples(preset) -> tuple[str, dict]:
+    """The preset's variant key and samples."""
+    v = preset.resolved()
+    variant = (v["distribution"], v["groove"])
+    material = {k: v[k] for k in ("fresnel_type", "ior", "n", "k")}
+    return key(variant), samples(variant, v["roughness"], material)
+
+
+def lee_presets():
+    return [p for p in sorted(presets.load_all().values(), key=lambda p: p.id)
+            if p.model_id == MODEL.id]
+
+
+def run(progress=print) -> dict:
+    """Fit every variant; return the data file's content."""
+    materials = training_materials()
+    out = {"format": 1, "model": MODEL.id,
+           "about": "Generated by `make fallback-fit` (addon/lab/fallback_fit.py); do not edit.",
+           "orders": ORDERS, "terms": [list(t) for t in TERMS],
+           "catalog": {p: list(MODEL.param(p).items) for p in ("distribution", "groove")},
+           "training": {"roughness": list(ROUGHNESS), "mu": list(MU), "materials": materials},
+           "variants": {}, "presets": {}}
+    for distribution in MODEL.param("distribution").items:
+        for groove in MODEL.param("groove").items:
+            variant = (distribution, groove)
+            s = stack([samples(variant, r, m) for r in ROUGHNESS for m in materials])
+            c = fit(s)
+            entry = {"coefficients": c.tolist(), **report(s, c)}
+            out["variants"][key(variant)] = entry
+            progress(f"fallback fit {key(variant)}: albedo worst "
+                     f"{entry['before']['worst']:.1%} -> {entry['after']['worst']:.1%}, mean "
+                     f"{entry['before']['mean']:.2%} -> {entry['after']['mean']:.2%}; lobe mean "
+                     f"{entry['lobe_before']['mean']:.1f} -> {entry['lobe_after']['mean']:.1f} deg")
+    for p in lee_presets():
+        variant, s = preset_samples(p)
+        out["presets"][p.id] = report(s, out["variants"][variant]["coefficients"])
+    return out
+
+
+def key(variant) -> str:
+    return "/".join(variant)
+
+
+def write(data: dict, path=None) -> None:
+    """One line per top-level entry, per variant and per preset (reviewable diffs)."""
+    def block(name, value, last):
+        if isinstance(value, dict) and name in ("variants", "presets"):
+            inner = ",\n".join(f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in value.items())
+            text = f" {json.dumps(name)}: {{\n{inner}\n }}"
+        else:
+            text = f" {json.dumps(name)}: {json.dumps(value)}"
+        return text + ("" if last else ",")
+    items = list(data.items())
+    lines = [block(k, v, i == len(items) - 1) for i, (k, v) in enumerate(items)]
+    (path or fallback.FIT_PATH).write_text("{\n" + "\n".join(lines) + "\n}\n", encoding="utf-8")
+
