@@ -47,6 +47,24 @@ NATIVE = {
 }
 
 
+def approximation(model_id: str, preset_id: str | None = None) -> str:
+    """What a model renders as where OSL does not run and how near it comes, for the artist:
+    the numpy errors of fit() for the preset (Lee, Cook-Torrance), or over Lee's fit."""
+    text = f"without OSL renders as {NATIVE[model_id]}"
+    errors = fit()["presets"].get(preset_id) if preset_id else None
+    if errors is None and model_id == "lee_vgroove":
+        variants = fit()["variants"].values()
+        errors = {name: {"mean": max(v[name]["mean"] for v in variants),
+                         "worst": max(v[name]["worst"] for v in variants)}
+                  for name in ("albedo", "lobe")}
+    if errors:
+        text += (f"; its brightness is off by {errors['albedo']['mean']:.1%} on average and "
+                 f"{errors['albedo']['worst']:.0%} at most, its highlight moved by "
+                 f"{errors['lobe']['mean']:.0f} degrees on average (computed against the exact "
+                 "model)")
+    return text
+
+
 class Branch:
     """Builds nodes inside a group's frame, reading the group's inputs by catalog id."""
 

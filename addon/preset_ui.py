@@ -18,7 +18,7 @@ from pathlib import Path
 
 import bpy
 
-from . import compat, nodes, presets
+from . import compat, fallback, nodes, presets
 from .ui import osl_render_problem
 
 PRESET_PROP = "microfacet_lab_preset"  # on WindowManager: the panel's gallery selection
@@ -182,7 +182,8 @@ class MATERIAL_OT_microfacet_lab_apply_preset(bpy.types.Operator):
         self.report({"INFO"}, f"{action} {material.name!r} from preset {preset.id!r}")
         problem = osl_render_problem(context.scene)
         if problem:
-            self.report({"WARNING"}, problem)
+            self.report({"WARNING"}, f"{problem}. {preset.label} "
+                                     f"{fallback.approximation(preset.model_id, preset.id)}")
         return {"FINISHED"}
 
 
@@ -240,6 +241,11 @@ class MATERIAL_PT_microfacet_lab_presets(bpy.types.Panel):
             col = layout.column(align=True)
             col.label(text=preset.model.label, icon="NODE_MATERIAL")
             col.label(text="Source: " + preset.citation()[:90])
+            if problem:
+                note = f"{preset.label} {fallback.approximation(preset.model_id, preset.id)}"
+                box = layout.box().column(align=True)
+                for i, line in enumerate(textwrap.wrap(note, 48)):
+                    box.label(text=line, icon="INFO" if i == 0 else "BLANK1")
         op = layout.operator(MATERIAL_OT_microfacet_lab_apply_preset.bl_idname, icon="CHECKMARK")
         if preset is not None:
             op.preset = preset.id

@@ -3,7 +3,7 @@ classes in one tuple, a draw function appended to a built-in menu, both undone o
 """
 import bpy
 
-from . import nodes
+from . import fallback, nodes
 from .catalog import MODELS
 
 # Cycles runs OSL on the CPU and on OptiX only; on these GPU backends a Script node does not run.
@@ -67,7 +67,9 @@ class NODE_OT_microfacet_lab_add(bpy.types.Operator):
             return {"CANCELLED"}
         problem = osl_render_problem(context.scene)
         if problem:
-            self.report({"WARNING"}, problem)
+            model = MODELS[self.model]
+            self.report({"WARNING"}, f"{problem}. {model.label} "
+                                     f"{fallback.approximation(model.id)}")
         for other in tree.nodes:
             other.select = False
         node.select = True

@@ -13,8 +13,8 @@ def main() -> None:
     data = fallback_fit.run()
     fallback_fit.write(data)
     for pid, entry in data["presets"].items():
-        print(f"{pid}: worst {entry['before']['worst']:.1%} -> {entry['after']['worst']:.1%}, "
-              f"mean {entry['before']['mean']:.2%} -> {entry['after']['mean']:.2%}")
+        print(f"{pid}: albedo worst {entry['albedo']['worst']:.1%}, mean "
+              f"{entry['albedo']['mean']:.2%}; lobe mean {entry['lobe']['mean']:.1f} deg")
 
 
 if __name__ == "__main__":

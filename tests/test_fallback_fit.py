@@ -29,14 +29,13 @@ def test_the_fit_matches_the_catalog_and_the_presets():
     assert [tuple(t) for t in DATA["terms"]] == fallback_fit.TERMS
     assert all(len(v["coefficients"]) == len(DATA["terms"]) for v in DATA["variants"].values())
     assert DATA["training"]["materials"] == fallback_fit.training_materials()
-    assert sorted(DATA["presets"]) == [p.id for p in fallback_fit.lee_presets()]
+    assert sorted(DATA["presets"]) == [p.id for p in fallback_fit.measured_presets()]
 
 
-@pytest.mark.parametrize("preset", [p.id for p in fallback_fit.lee_presets()])
+@pytest.mark.parametrize("preset", [p.id for p in fallback_fit.measured_presets()])
 def test_the_stated_preset_errors_are_reproduced(preset):
-    p = next(p for p in fallback_fit.lee_presets() if p.id == preset)
-    variant, s = fallback_fit.preset_samples(p)
-    got = fallback_fit.report(s, DATA["variants"][variant]["coefficients"])
+    p = next(p for p in fallback_fit.measured_presets() if p.id == preset)
+    got = fallback_fit.preset_errors(p, DATA)
     stated = DATA["presets"][preset]
     assert set(got) == set(stated)
     for name in got:

@@ -23,7 +23,7 @@ from bpy_helpers import run_bpy_script
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import compat, nodes, ui  # noqa: E402
+from addon import compat, fallback, nodes, ui  # noqa: E402
 from addon.catalog import COLOR, ENUM, ENUMS, FACTOR, MODELS, VECTOR  # noqa: E402
 from addon.lab import harness, images  # noqa: E402
 
@@ -235,6 +235,8 @@ def panel_text():
 apply = lambda: bpy.ops.material.microfacet_lab_apply_preset(preset="gold")
 out = {}
 scene.cycles.shading_system = False
+out["apply_lee_osl_off"] = captured(
+    lambda: bpy.ops.material.microfacet_lab_apply_preset(preset="rough_gold_lee"))
 out["apply_osl_off"] = captured(apply)
 out["panel_osl_off"] = panel_text()
 area = bpy.context.window.screen.areas[0]
@@ -279,7 +281,7 @@ def test_functions_say_why_it_renders_black_and_how_to_fix():
 def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
     out = run_bpy_script(WARNINGS, tmp_path, str(ROOT))
     log = out.pop("_log")
-    for key in ("apply_osl_off", "add_osl_off", "apply_cuda"):
+    for key in ("apply_osl_off", "add_osl_off", "apply_cuda", "apply_lee_osl_off"):
         result, printed = out[key]
         assert result == ["FINISHED"], (key, printed, log)
         fix = DEVICE_FIX if key == "apply_cuda" else OSL_FIX
@@ -291,6 +293,12 @@ def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
         assert result == ["FINISHED"] and "Warning" not in printed, (key, printed)
     assert OSL_FIX in out["panel_osl_off"] and DEVICE_FIX in out["panel_cuda"]
     assert "nearest built-in BSDF, an approximation" in out["panel_osl_off"]
+    # ... and what the material becomes, with how near it comes where that was computed.
+    assert "without OSL renders as Metallic BSDF" in out["apply_osl_off"][1]
+    assert "without OSL renders as Glass BSDF" in out["add_osl_off"][1]
+    lee = fallback.fit()["presets"]["rough_gold_lee"]["albedo"]
+    assert f"off by {lee['mean']:.1%} on average and {lee['worst']:.0%} at most" in \
+        out["apply_lee_osl_off"][1]
     assert "Open Shading" not in out["panel_cpu"] and DEVICE_FIX not in out["panel_cpu"]
 
 

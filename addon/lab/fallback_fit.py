@@ -151,9 +151,14 @@ def branch_moments(s: dict, coefficients=None):
     return s["native"] + s["single"] * c
 
 
+def albedo_error(branch, exact) -> np.ndarray:
+    """Relative albedo error of a branch's moments against the exact model's."""
+    return branch[0] / exact[0] - 1.0
+
+
 def errors(s: dict, coefficients=None) -> np.ndarray:
-    """Relative albedo error of the branch against Lee."""
-    return branch_moments(s, coefficients)[0] / s["lee"][0] - 1.0
+    """Relative albedo error of Lee's branch against Lee."""
+    return albedo_error(branch_moments(s, coefficients), s["lee"])
 
 
 def angle(moments):
@@ -162,10 +167,26 @@ def angle(moments):
     return np.degrees(np.arctan2(moments[2], moments[1]))
 
 
+def lobe_error(branch, exact) -> np.ndarray:
+    """Angle in degrees between the mean directions of the light a branch and the exact model
+    reflect: how far the highlight moves."""
+    return np.abs(angle(branch) - angle(exact))
+
+
 def lobe_errors(s: dict, coefficients=None) -> np.ndarray:
-    """Angle in degrees between the mean directions of the light the branch and Lee reflect:
-    how far the highlight moves."""
-    return np.abs(angle(branch_moments(s, coefficients)) - angle(s["lee"]))
+    return lobe_error(branch_moments(s, coefficients), s["lee"])
+
+
+def cook_torrance_moments(preset):
+    """(exact, branch) moments of a Cook-Torrance preset: the model by quadrature, and its
+    branch, the Lambertian share plus the specular share of a Beckmann metal with Smith
+    Height-correlated masking (addon/fallback.py)."""
+    v, mu = preset.resolved(), np.asarray(MU)
+    exact = np.stack(quadrature.directional_moments(make_bsdf("cook_torrance", preset.params), mu))
+    diffuse = np.broadcast_to((1.0 - v["specular"]) * np.asarray(v["base_color"]), (len(mu), 3))
+    n, k = conductor_of(v)
+    specular = single_moments("beckmann", v["roughness"], mu, "conductor", n, k)
+    return exact, np.stack([diffuse, 2.0 / 3.0 * diffuse, 0.0 * diffuse]) + v["specular"] * specular
 
 
 def training_materials() -> list[dict]:
@@ -200,10 +221,20 @@ def summary(err: np.ndarray) -> dict:
 
 
 def report(s: dict, coefficients) -> dict:
-    """Albedo (relative) and lobe (degrees) errors without and with the correction."""
-    return {"before": summary(errors(s)), "after": summary(errors(s, coefficients)),
-            "lobe_before": summary(lobe_errors(s)),
-            "lobe_after": summary(lobe_errors(s, coefficients))}
+    """Albedo (relative) and lobe (degrees) errors of Lee's branch with the correction, and of
+    the plain branch (without it)."""
+    return {"albedo": summary(errors(s, coefficients)), "lobe": summary(lobe_errors(s, coefficients)),
+            "albedo_plain": summary(errors(s)), "lobe_plain": summary(lobe_errors(s))}
+
+
+def preset_errors(preset, data: dict) -> dict:
+    """The errors of a Lee or Cook-Torrance preset's branch (report's keys)."""
+    if preset.model_id == MODEL.id:
+        variant, s = preset_samples(preset)
+        return report(s, data["variants"][variant]["coefficients"])
+    exact, branch = cook_torrance_moments(preset)
+    return {"albedo": summary(albedo_error(branch, exact)),
+            "lobe": summary(lobe_error(branch, exact))}
 
 
 def preset_samples(preset) -> tuple[str, dict]:
@@ -214,9 +245,10 @@ def preset_samples(preset) -> tuple[str, dict]:
     return key(variant), samples(variant, v["roughness"], material)
 
 
-def lee_presets():
+def measured_presets(models=(MODEL.id, "cook_torrance")):
+    """The presets whose branch has a numpy model here: Lee's and Cook-Torrance's."""
     return [p for p in sorted(presets.load_all().values(), key=lambda p: p.id)
-            if p.model_id == MODEL.id]
+            if p.model_id in models]
 
 
 def run(progress=print) -> dict:
@@ -236,12 +268,12 @@ def run(progress=print) -> dict:
             entry = {"coefficients": c.tolist(), **report(s, c)}
             out["variants"][key(variant)] = entry
             progress(f"fallback fit {key(variant)}: albedo worst "
-                     f"{entry['before']['worst']:.1%} -> {entry['after']['worst']:.1%}, mean "
-                     f"{entry['before']['mean']:.2%} -> {entry['after']['mean']:.2%}; lobe mean "
-                     f"{entry['lobe_before']['mean']:.1f} -> {entry['lobe_after']['mean']:.1f} deg")
-    for p in lee_presets():
-        variant, s = preset_samples(p)
-        out["presets"][p.id] = report(s, out["variants"][variant]["coefficients"])
+                     f"{entry['albedo_plain']['worst']:.1%} -> {entry['albedo']['worst']:.1%}, "
+                     f"mean {entry['albedo_plain']['mean']:.2%} -> {entry['albedo']['mean']:.2%}; "
+                     f"lobe mean {entry['lobe_plain']['mean']:.1f} -> "
+                     f"{entry['lobe']['mean']:.1f} deg")
+    for p in measured_presets():
+        out["presets"][p.id] = preset_errors(p, out)
     return out
 
 

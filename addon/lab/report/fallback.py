@@ -8,6 +8,9 @@ against the exact model it stands in for, and what the branch costs where OSL ru
   of pictures (exact, fallback, 4 x |difference|).
 - Cost with OSL on: the presets' grid rendered with and without the branch, alternating, the
   wall clock of the render call (scene sync and OSL JIT included).
+- Lee's correction lobe (addon/lab/fallback_fit.py): the numpy albedo and lobe errors of the
+  branch with and without it, as `make fallback-fit` stored them (tests/test_fallback_fit.py
+  holds them to the reference).
 """
 from __future__ import annotations
 
@@ -119,4 +122,36 @@ def page(cfg, rows, res) -> list:
               f"samples, render call with the branch {np.median(cost['with']):.2f} s, without "
               f"{np.median(cost['without']):.2f} s (medians of {len(cost['with'])} alternating "
               f"runs): ratio {ratio:.3f}.", ""]
-    return lines
+    return lines + fit_lines()
+
+
+def fit_lines() -> list:
+    """The numpy errors of Lee's native branch without and with its fitted correction lobe."""
+    fit = fallback.fit()
+    lines = ["### Lee's correction lobe and the presets' errors (numpy)", "",
+             "Lee's branch adds a single-scattering Glossy lobe whose colour is a polynomial in "
+             "roughness, Facing and F0 fitted to the reference (`make fallback-fit`). Albedo: "
+             "relative error over the training grid (roughness "
+             f"{fit['training']['roughness'][0]}-{fit['training']['roughness'][-1]}, "
+             f"{len(fit['training']['mu'])} incidences, {len(fit['training']['materials'])} "
+             "Fresnel cases: the presets' metals, dielectrics, F = 1) or the preset's "
+             "incidences; lobe: the angle between the mean directions of the reflected light "
+             "(plain -> with the lobe). The presets' figures are what the panel and the "
+             "operators tell the artist.",
+             "", "| variant or preset | albedo worst, plain -> fitted | mean | "
+             "lobe mean (deg) | lobe worst (deg) |", "|---|---|---|---|---|"]
+    def pair(e, name, stat, fmt):
+        plain = e.get(name + "_plain")
+        return (fmt(plain[stat]) + " -> " if plain else "") + fmt(e[name][stat])
+
+    def pct(v):
+        return f"{100 * v:.1f}%"
+
+    def deg(v):
+        return f"{v:.1f}"
+
+    for name, e in list(fit["variants"].items()) + list(fit["presets"].items()):
+        lines.append(f"| {name} | {pair(e, 'albedo', 'worst', pct)} | "
+                     f"{pair(e, 'albedo', 'mean', pct)} | {pair(e, 'lobe', 'mean', deg)} | "
+                     f"{pair(e, 'lobe', 'worst', deg)} |")
+    return lines + ["", "Cook-Torrance presets: their branch as it is (no correction lobe).", ""]
