@@ -24,7 +24,7 @@ COMPAT ?= 4.2 4.5 5.0
 # and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
-.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace fallback-fit clean
+.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace fallback-fit tables clean
 
 venv:
 	@$(VENV_SH) requirements.txt >/dev/null
@@ -65,6 +65,14 @@ thumbnails: venv
 
 lee-furnace: venv
 	$(PY) scripts/lee_furnace.py
+
+# The reference tables the repository carries (addon/lab/table_cache.py): make test, recording
+# which tables it reads, then those copied into addon/lab/table_seed/ (after changing the
+# numpy reference, the catalog or a test's reference inputs; about as long as make test).
+tables: venvs
+	@mkdir -p out && rm -f out/tables-used.txt
+	MICROFACET_LAB_TABLE_RECORD=$(CURDIR)/out/tables-used.txt $(MAKE) test
+	$(PY) scripts/seed_tables.py out/tables-used.txt
 
 # Lee's native branch's correction lobe, fitted to the numpy reference (a few minutes).
 fallback-fit: venv

@@ -13,6 +13,8 @@ from addon.lab.reference.quadrature import MomentTable
 def cache_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("MICROFACET_LAB_CACHE", str(tmp_path))
     monkeypatch.delenv("MICROFACET_LAB_TABLE_CACHE", raising=False)
+    monkeypatch.delenv("MICROFACET_LAB_TABLE_RECORD", raising=False)
+    monkeypatch.setattr(table_cache, "SEED_DIR", tmp_path / "seed")
     return tmp_path / "tables"
 
 
@@ -92,3 +94,32 @@ def test_the_digest_covers_the_reference_sources(tmp_path, monkeypatch):
     after = table_cache.key("t", 1)
     table_cache.code_digest.cache_clear()
     assert before != after
+
+
+def test_a_fresh_machine_reads_the_repository_seed_and_records_what_it_read(cache_dir, tmp_path,
+                                                                           monkeypatch):
+    """What `make tables` writes and a fresh clone reads: an entry found in the seed is read
+    from it (not computed, not copied into the cache); a key the seed lacks (other inputs, or
+    changed code) is computed; every entry read is recorded when asked."""
+    compute, calls = _counting([_table(5)])
+    table_cache.tables("t", ("a", 1), compute)
+    seed = table_cache.SEED_DIR
+    seed.mkdir()
+    for entry in cache_dir.iterdir():
+        entry.rename(seed / entry.name)
+    record = tmp_path / "record.txt"
+    monkeypatch.setenv("MICROFACET_LAB_TABLE_RECORD", str(record))
+    again = table_cache.tables("t", ("a", 1), compute)
+    assert len(calls) == 1 and _same(again[0], _table(5))
+    assert not list(cache_dir.iterdir())
+    table_cache.tables("t", ("a", 2), compute)
+    assert len(calls) == 2
+    assert record.read_text().split() == [f"t-{table_cache.key('t', ('a', 1))}.npz",
+                                          f"t-{table_cache.key('t', ('a', 2))}.npz"]
+
+
+def test_the_seed_holds_only_table_entries():
+    """addon/lab/table_seed/ (make tables): npz entries named name-key, nothing else."""
+    names = [p.name for p in table_cache.SEED_DIR.iterdir()] if table_cache.SEED_DIR.exists() else []
+    bad = [n for n in names if not (n.endswith(".npz") and len(n.rsplit("-", 1)[-1]) == 36)]
+    assert not bad, bad

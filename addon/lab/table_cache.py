@@ -10,6 +10,14 @@ a table is computed from: the catalog (addon/catalog.py), the numpy reference
 never read, only left behind. A table read back equals the one
 computed bit for bit (npz, no pickle). Set MICROFACET_LAB_TABLE_CACHE=0 to compute everything
 afresh (a cold run) without touching the cache.
+
+The repository carries the entries `make test` reads (addon/lab/table_seed/, refreshed by
+`make tables`), so a fresh clone on a fresh machine reads them instead of spending minutes of
+Monte Carlo and quadrature on them. They are looked up under the same key, after the user's
+cache: an entry whose code or inputs changed is simply not found there and is computed (and
+cached) as before, so a stale seed costs time, never a wrong table. `make tables` runs `make
+test` with MICROFACET_LAB_TABLE_RECORD naming a file that collects every entry's name, then
+copies those entries here and drops the others (scripts/seed_tables.py).
 """
 from __future__ import annotations
 
@@ -28,6 +36,7 @@ _ADDON = Path(__file__).resolve().parent.parent
 _SOURCES = (_ADDON / "catalog.py", _ADDON / "lab" / "table_cache.py")
 _SOURCE_DIRS = (_ADDON / "lab" / "reference",)
 _FIELDS = ("x", "E", "Vn", "Vt_over_sin")
+SEED_DIR = Path(__file__).resolve().parent / "table_seed"
 
 
 def enabled() -> bool:
@@ -74,16 +83,26 @@ def _load(path: Path) -> list:
 
 
 def tables(name: str, inputs, compute) -> list:
-    """compute() -> a list of MomentTable (or None), read from the cache when it holds this
-    name and these inputs for this code, else computed and stored."""
+    """compute() -> a list of MomentTable (or None), read from the cache (or the repository's
+    seed) when it holds this name and these inputs for this code, else computed and stored."""
     if not enabled():
         return list(compute())
-    path = directory() / f"{name}-{key(name, inputs)}.npz"
-    if path.exists():
-        try:
-            return _load(path)
-        except (OSError, ValueError, KeyError):
-            pass  # a damaged entry: compute it again
+    filename = f"{name}-{key(name, inputs)}.npz"
+    _record(filename)
+    for path in (directory() / filename, SEED_DIR / filename):
+        if path.exists():
+            try:
+                return _load(path)
+            except (OSError, ValueError, KeyError):
+                pass  # a damaged entry: compute it again
     result = list(compute())
-    _save(path, result)
+    _save(directory() / filename, result)
     return result
+
+
+def _record(filename: str) -> None:
+    """Append the entry's name to $MICROFACET_LAB_TABLE_RECORD, if set (`make tables`)."""
+    log = os.environ.get("MICROFACET_LAB_TABLE_RECORD")
+    if log:
+        with open(log, "a", encoding="utf-8") as out:
+            out.write(filename + "\n")
