@@ -28,8 +28,8 @@ from pathlib import Path
 from . import compat
 from .catalog import MODELS, Model
 
-# Lee's correction lobe: polynomial coefficients fitted to the numpy reference by
-# addon/lab/fallback_fit.py (`make fallback-fit`), read here as data.
+# Lee's and Cook-Torrance's correction lobes: polynomial coefficients fitted to the numpy
+# reference by addon/lab/fallback_fit.py (`make fallback-fit`), read here as data.
 FIT_PATH = Path(__file__).resolve().with_name("fallback_fit.json")
 
 SWITCH_NODE_NAME = "Microfacet Lab: OSL or native"
@@ -37,7 +37,8 @@ NATIVE_FRAME_NAME = "Microfacet Lab: native branch"
 
 # What the artist is told the model becomes without OSL (panel, operators, the render's line).
 NATIVE = {
-    "cook_torrance": "Diffuse plus a Beckmann metal (Smith instead of V-cavity shadowing)",
+    "cook_torrance": "Diffuse plus a Beckmann metal (Smith instead of V-cavity shadowing, "
+                     "with a Glossy lobe fitted to the difference)",
     "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
                          "Beckmann with Height-correlated masking (metals from Blender 5.0)",
     "walter_glass": "Glass BSDF: exact for Height-correlated masking",
@@ -52,8 +53,8 @@ def approximation(model_id: str, preset_id: str | None = None) -> str:
     the numpy errors of fit() for the preset (Lee, Cook-Torrance), or over Lee's fit."""
     text = f"without OSL renders as {NATIVE[model_id]}"
     errors = fit()["presets"].get(preset_id) if preset_id else None
-    if errors is None and model_id == "lee_vgroove":
-        variants = fit()["variants"].values()
+    variants = [v for k, v in fit()["variants"].items() if k.startswith(model_id + "/")]
+    if errors is None and variants:
         errors = {name: {"mean": max(v[name]["mean"] for v in variants),
                          "worst": max(v[name]["worst"] for v in variants)}
                   for name in ("albedo", "lobe")}
@@ -250,7 +251,9 @@ def cook_torrance(b: Branch):
     b.link(b.src("base_color"), diffuse_color.inputs[0])
     b.link(share.outputs[0], diffuse_color.inputs["Scale"])
     diffuse = b.bsdf("ShaderNodeBsdfDiffuse", Color=diffuse_color.outputs[0])
-    specular = b.mix_shader(b.src("specular"), None, fresnel_metal(b, "BECKMANN"))
+    # The correction lobe adds what V-cavity masking keeps over Smith's at grazing incidence.
+    metal_ = b.add_shader(fresnel_metal(b, "BECKMANN"), correction(b, "BECKMANN"))
+    specular = b.mix_shader(b.src("specular"), None, metal_)
     return b.add_shader(diffuse, specular)
 
 
@@ -266,29 +269,45 @@ def walter_glass(b: Branch):
 def lee_vgroove(b: Branch):
     # Cycles' multiscatter GGX keeps a rough metal's energy, as the grooves' bounces do; the
     # correction lobe adds what the later bounces keep where the Fresnel reflectance is low.
-    return b.by_distribution(lambda d: b.add_shader(reflection(b, d), lee_correction(b, d)),
+    return b.by_distribution(lambda d: b.add_shader(reflection(b, d), correction(b, d)),
                              ggx="MULTI_GGX")
 
 
 @lru_cache(maxsize=None)
 def fit() -> dict:
-    """The fitted correction (FIT_PATH), read once."""
+    """The fitted corrections (FIT_PATH), read once."""
     return json.loads(FIT_PATH.read_text(encoding="utf-8"))
 
 
-def lee_correction(b: Branch, distribution: str):
-    """A single-scattering Glossy BSDF of colour max(C(r, x, F0), 0) times the tint, C the
-    polynomial fitted for the distribution and groove shape (addon/lab/fallback_fit.py)."""
+def correction(b: Branch, distribution: str):
+    """The model's correction lobe (addon/lab/fallback_fit.py): a single-scattering Glossy BSDF
+    with the branch's distribution and roughness, of colour max(C(r, x, F0), 0), C the
+    polynomial fitted for the model, distribution and (Lee) groove shape; Lee's times the tint.
+    `distribution` as by_distribution passes it."""
     dist = "beckmann" if distribution == "BECKMANN" else "ggx"
+    f0, x = branch_f0(b), b.facing()
+
+    def colour(*key):
+        coefficients = fit()["variants"]["/".join((b.model.id, dist) + key)]["coefficients"]
+        return polynomial_color(b, coefficients, x, f0)
+
+    if b.model.id == "lee_vgroove":
+        grooves = [colour(groove) for groove in b.model.param("groove").items]
+        tint = b.src("base_color")
+        value = b.vector_math("MULTIPLY", b.mix_vector(b.is_item("groove", "asymmetric"),
+                                                       *grooves), tint)
+    else:
+        value = colour()
+    return b.bsdf("ShaderNodeBsdfGlossy", dist.upper(), Color=value, Roughness=b.src("roughness"))
+
+
+def branch_f0(b: Branch):
+    """Reflectance at normal incidence of the model's Fresnel, per channel (1 for None)."""
     n, k = metal_indices(b)
-    f0 = b.mix_vector(b.is_item("fresnel_type", "none"), f0_conductor(b, n, k), (1.0, 1.0, 1.0))
-    x = b.facing()
-    colours = [polynomial_color(b, fit()["variants"][f"{dist}/{groove}"]["coefficients"], x, f0)
-               for groove in b.model.param("groove").items]
-    colour = b.mix_vector(b.is_item("groove", "asymmetric"), *colours)
-    tinted_colour = b.vector_math("MULTIPLY", colour, b.src("base_color"))
-    return b.bsdf("ShaderNodeBsdfGlossy", dist.upper(), Color=tinted_colour,
-                  Roughness=b.src("roughness"))
+    f0 = f0_conductor(b, n, k)
+    if "none" not in b.model.param("fresnel_type").items:
+        return f0
+    return b.mix_vector(b.is_item("fresnel_type", "none"), f0, (1.0, 1.0, 1.0))
 
 
 def polynomial_color(b: Branch, coefficients, x, f0):

@@ -21,14 +21,12 @@ DATA = fallback.fit()
 
 
 def test_the_fit_matches_the_catalog_and_the_presets():
-    model = fallback_fit.MODEL
-    assert DATA["model"] == model.id
-    assert DATA["catalog"] == {p: list(model.param(p).items) for p in ("distribution", "groove")}
-    assert {tuple(k.split("/")) for k in DATA["variants"]} == {
-        (d, g) for d in model.param("distribution").items for g in model.param("groove").items}
+    assert DATA["catalog"] == fallback_fit.catalog_items()
+    assert sorted(DATA["variants"]) == sorted(v.key for v in fallback_fit.VARIANTS)
     assert [tuple(t) for t in DATA["terms"]] == fallback_fit.TERMS
     assert all(len(v["coefficients"]) == len(DATA["terms"]) for v in DATA["variants"].values())
-    assert DATA["training"]["materials"] == fallback_fit.training_materials()
+    assert DATA["training"]["materials"] == {m: fallback_fit.training_materials(m)
+                                             for m in fallback_fit.catalog_items()}
     assert sorted(DATA["presets"]) == [p.id for p in fallback_fit.measured_presets()]
 
 
@@ -44,14 +42,14 @@ def test_the_stated_preset_errors_are_reproduced(preset):
                 f"{preset} {name} {stat}: run `make fallback-fit`"
 
 
-@pytest.mark.parametrize("variant", sorted(DATA["variants"]))
+@pytest.mark.parametrize("variant", fallback_fit.VARIANTS, ids=lambda v: v.key)
 def test_the_correction_lowers_the_error_of_every_variant(variant):
-    c = DATA["variants"][variant]["coefficients"]
-    s = fallback_fit.stack([fallback_fit.samples(tuple(variant.split("/")), r, m)
-                            for r in (0.65,) for m in fallback_fit.training_materials()])
+    c = DATA["variants"][variant.key]["coefficients"]
+    s = fallback_fit.stack([fallback_fit.samples(variant, 0.65, m)
+                            for m in fallback_fit.training_materials(variant.model)])
     before = fallback_fit.summary(fallback_fit.errors(s))
     after = fallback_fit.summary(fallback_fit.errors(s, c))
-    print(f"\n[fallback fit] {variant}: worst {before['worst']:.3f} -> {after['worst']:.3f}, "
+    print(f"\n[fallback fit] {variant.key}: worst {before['worst']:.3f} -> {after['worst']:.3f}, "
           f"mean {before['mean']:.4f} -> {after['mean']:.4f}")
     assert after["mean"] < before["mean"] and after["worst"] < before["worst"]
 

@@ -1,4 +1,5 @@
-"""The correction lobe of Lee's native branch, fitted to the numpy reference (`make fallback-fit`).
+"""The correction lobes of Lee's and Cook-Torrance's native branches, fitted to the numpy
+reference (`make fallback-fit`).
 
 Without OSL, Lee's V-grooves render as Cycles' Metallic BSDF (Multiscatter GGX; Beckmann has no
 multiscatter variant in Cycles, so single scattering) or, for Fresnel None, a Glossy BSDF
@@ -17,6 +18,11 @@ albedo: E_native + E_1 max(C, 0) = E_lee, with E_1 the single-scattering albedo 
 the relative error as the residual. One polynomial per distribution and groove shape; the
 training set is the presets' metals, four dielectrics and F = 1 over roughness 0.05-1.
 
+Cook-Torrance's branch (a Lambertian share plus the specular share of a Beckmann metal with
+Smith masking) falls short of the model's V-cavity masking at grazing incidence (blue_rubber:
+-12% at mu = 0.01); its specular share gets a correction lobe fitted the same way (one
+polynomial, metals and dielectrics: the model has no Fresnel None).
+
 The native albedo is Cycles' closure in numpy: single scattering from the Walter reference
 (Cycles' GGX and Beckmann with Height-correlated masking are the same BSDF, exact conductor
 Fresnel from Blender 5.0), times Cycles' energy compensation for Multiscatter GGX,
@@ -29,6 +35,7 @@ Cycles). Measured against renders by `make report` (section "fallback").
 from __future__ import annotations
 
 import json
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,7 +44,7 @@ from ..catalog import MODELS
 from .reference import make_bsdf, quadrature
 from .reference.fresnel import fresnel_conductor
 
-MODEL = MODELS["lee_vgroove"]
+LEE, COOK_TORRANCE = MODELS["lee_vgroove"], MODELS["cook_torrance"]
 ORDERS = {"roughness": 3, "facing": 3, "f0": 2}  # highest power of r, x, F0
 TERMS = [(i, j, k) for i in range(ORDERS["roughness"] + 1) for j in range(ORDERS["facing"] + 1)
          for k in range(ORDERS["f0"] + 1)]
@@ -46,6 +53,21 @@ MU, _ = np.polynomial.legendre.leggauss(12)
 MU = tuple(0.5 * (MU + 1.0))
 DIELECTRIC_IORS = (1.33, 1.5168, 1.8, 2.42)
 WHITE = {"fresnel_type": "none"}
+
+
+class Variant(NamedTuple):
+    """One fitted polynomial: the model, its distribution and (Lee) its groove shape."""
+    model: str
+    distribution: str
+    groove: str | None = None
+
+    @property
+    def key(self) -> str:  # fallback.fit()["variants"] key, read by fallback.py
+        return "/".join(p for p in (self.model, self.distribution, self.groove) if p)
+
+
+VARIANTS = [Variant(LEE.id, d, g) for d in LEE.param("distribution").items
+            for g in LEE.param("groove").items] + [Variant(COOK_TORRANCE.id, "beckmann")]
 
 
 # -- Cycles' native closures in numpy ----------------------------------------------------------
@@ -114,10 +136,15 @@ def f0_of(material: dict) -> np.ndarray:
     return fresnel_conductor(1.0, np.asarray(n), np.asarray(k))
 
 
-def lee_moments(variant: tuple, r: float, mu, material: dict):
-    distribution, groove = variant
-    values = dict(material, roughness=r, distribution=distribution, groove=groove)
-    return np.stack(make_bsdf("lee_vgroove", values).directional_moments(np.asarray(mu)))
+def exact_moments(variant: Variant, r: float, mu, material: dict):
+    """The model's moments: Lee by its closed-form quadrature, Cook-Torrance's specular share
+    alone (specular 1) by reference/quadrature.py."""
+    values = dict(material, roughness=r)
+    if variant.model == LEE.id:
+        values.update(distribution=variant.distribution, groove=variant.groove)
+        return np.stack(make_bsdf(LEE.id, values).directional_moments(np.asarray(mu)))
+    bsdf = make_bsdf(COOK_TORRANCE.id, dict(values, specular=1.0))
+    return np.stack(quadrature.directional_moments(bsdf, np.asarray(mu, dtype=float)))
 
 
 # -- the polynomial ------------------------------------------------------------------------------
@@ -127,28 +154,32 @@ def basis(r, x, f0, terms=TERMS) -> np.ndarray:
 
 
 def correction(coefficients, r, x, f0, terms=TERMS):
-    """C(r, x, F0) before the clamp at 0: what fallback.lee_correction builds in nodes."""
+    """C(r, x, F0) before the clamp at 0: what fallback.correction builds in nodes."""
     return basis(r, x, f0, terms) @ np.asarray(coefficients, dtype=float)
 
 
-def samples(variant, r, material, mu=MU):
-    """Arrays over (mu, channel): r, x, F0; the moments (3, ...) of Lee, of the native branch
-    and of the single-scattering lobe with F = 1."""
+def samples(variant: Variant, r, material, mu=MU, offset=0.0, scale=1.0):
+    """Arrays over (mu, channel): r, x, F0; the moments (3, ...) of the model, of the native
+    branch and of the single-scattering lobe with F = 1. The model and its branch are both
+    offset + scale * (the part fitted): Cook-Torrance's diffuse share and its specular."""
     mu = np.asarray(mu, dtype=float)
-    lee = lee_moments(variant, r, mu, material)
-    shape = lee.shape[1:]
+    exact = exact_moments(variant, r, mu, material)
+    shape = exact.shape[1:]
     return {"r": np.full(shape, r), "x": np.broadcast_to((1.0 - mu)[:, None], shape),
-            "f0": np.broadcast_to(f0_of(material), shape), "lee": lee,
-            "native": native_moments(variant[0], r, mu, material),
-            "single": single_moments(variant[0], r, mu)}
+            "f0": np.broadcast_to(f0_of(material), shape),
+            "offset": np.broadcast_to(offset, exact.shape), "scale": np.full(shape, scale),
+            "exact": offset + scale * exact,
+            "native": native_moments(variant.distribution, r, mu, material),
+            "single": single_moments(variant.distribution, r, mu)}
 
 
 def branch_moments(s: dict, coefficients=None):
     """The native branch's moments, with the correction lobe if coefficients are given."""
-    if coefficients is None:
-        return s["native"]
-    c = np.maximum(correction(coefficients, s["r"], s["x"], s["f0"]), 0.0)
-    return s["native"] + s["single"] * c
+    lobe = s["native"]
+    if coefficients is not None:
+        lobe = lobe + s["single"] * np.maximum(correction(coefficients, s["r"], s["x"], s["f0"]),
+                                               0.0)
+    return s["offset"] + s["scale"] * lobe
 
 
 def albedo_error(branch, exact) -> np.ndarray:
@@ -157,8 +188,8 @@ def albedo_error(branch, exact) -> np.ndarray:
 
 
 def errors(s: dict, coefficients=None) -> np.ndarray:
-    """Relative albedo error of Lee's branch against Lee."""
-    return albedo_error(branch_moments(s, coefficients), s["lee"])
+    """Relative albedo error of the branch against the model."""
+    return albedo_error(branch_moments(s, coefficients), s["exact"])
 
 
 def angle(moments):
@@ -174,22 +205,10 @@ def lobe_error(branch, exact) -> np.ndarray:
 
 
 def lobe_errors(s: dict, coefficients=None) -> np.ndarray:
-    return lobe_error(branch_moments(s, coefficients), s["lee"])
+    return lobe_error(branch_moments(s, coefficients), s["exact"])
 
 
-def cook_torrance_moments(preset):
-    """(exact, branch) moments of a Cook-Torrance preset: the model by quadrature, and its
-    branch, the Lambertian share plus the specular share of a Beckmann metal with Smith
-    Height-correlated masking (addon/fallback.py)."""
-    v, mu = preset.resolved(), np.asarray(MU)
-    exact = np.stack(quadrature.directional_moments(make_bsdf("cook_torrance", preset.params), mu))
-    diffuse = np.broadcast_to((1.0 - v["specular"]) * np.asarray(v["base_color"]), (len(mu), 3))
-    n, k = conductor_of(v)
-    specular = single_moments("beckmann", v["roughness"], mu, "conductor", n, k)
-    return exact, np.stack([diffuse, 2.0 / 3.0 * diffuse, 0.0 * diffuse]) + v["specular"] * specular
-
-
-def training_materials() -> list[dict]:
+def training_materials(model: str = LEE.id) -> list[dict]:
     metals, seen = [], set()
     for p in sorted(presets.load_all().values(), key=lambda p: p.id):
         v = p.params
@@ -197,7 +216,8 @@ def training_materials() -> list[dict]:
             seen.add((tuple(v["n"]), tuple(v["k"])))
             metals.append({"fresnel_type": "conductor", "n": list(v["n"]), "k": list(v["k"])})
     dielectrics = [{"fresnel_type": "dielectric", "ior": ior} for ior in DIELECTRIC_IORS]
-    return metals + dielectrics + [WHITE]
+    fresnel_none = [WHITE] if "none" in MODELS[model].param("fresnel_type").items else []
+    return metals + dielectrics + fresnel_none
 
 
 def stack(many: list[dict]) -> dict:
@@ -208,10 +228,11 @@ def stack(many: list[dict]) -> dict:
 
 
 def fit(s: dict) -> np.ndarray:
-    """Least squares of the relative error: (E_1 C - (E_lee - E_native)) / E_lee."""
-    lee, native, single = s["lee"][0], s["native"][0], s["single"][0]
-    a = basis(s["r"], s["x"], s["f0"]) * (single / lee)[:, None]
-    b = (lee - native) / lee
+    """Least squares of the relative error: (E_1 C - (E - E_native)) / E (training samples:
+    offset 0, scale 1)."""
+    exact, native, single = s["exact"][0], s["native"][0], s["single"][0]
+    a = basis(s["r"], s["x"], s["f0"]) * (single / exact)[:, None]
+    b = (exact - native) / exact
     coefficients, *_ = np.linalg.lstsq(a, b, rcond=None)
     return coefficients
 
@@ -221,64 +242,69 @@ def summary(err: np.ndarray) -> dict:
 
 
 def report(s: dict, coefficients) -> dict:
-    """Albedo (relative) and lobe (degrees) errors of Lee's branch with the correction, and of
+    """Albedo (relative) and lobe (degrees) errors of the branch with the correction, and of
     the plain branch (without it)."""
-    return {"albedo": summary(errors(s, coefficients)), "lobe": summary(lobe_errors(s, coefficients)),
+    return {"albedo": summary(errors(s, coefficients)),
+            "lobe": summary(lobe_errors(s, coefficients)),
             "albedo_plain": summary(errors(s)), "lobe_plain": summary(lobe_errors(s))}
 
 
-def preset_errors(preset, data: dict) -> dict:
-    """The errors of a Lee or Cook-Torrance preset's branch (report's keys)."""
-    if preset.model_id == MODEL.id:
-        variant, s = preset_samples(preset)
-        return report(s, data["variants"][variant]["coefficients"])
-    exact, branch = cook_torrance_moments(preset)
-    return {"albedo": summary(albedo_error(branch, exact)),
-            "lobe": summary(lobe_error(branch, exact))}
-
-
 def preset_samples(preset) -> tuple[str, dict]:
-    """The preset's variant key and samples."""
+    """The preset's variant key and samples (Cook-Torrance: its diffuse share as the offset,
+    its specular as the scale)."""
     v = preset.resolved()
-    variant = (v["distribution"], v["groove"])
     material = {k: v[k] for k in ("fresnel_type", "ior", "n", "k")}
-    return key(variant), samples(variant, v["roughness"], material)
+    if preset.model_id == LEE.id:
+        variant = Variant(LEE.id, v["distribution"], v["groove"])
+        return variant.key, samples(variant, v["roughness"], material)
+    diffuse = np.broadcast_to((1.0 - v["specular"]) * np.asarray(v["base_color"]), (len(MU), 3))
+    offset = np.stack([diffuse, 2.0 / 3.0 * diffuse, 0.0 * diffuse])  # Lambertian moments
+    variant = Variant(COOK_TORRANCE.id, "beckmann")
+    return variant.key, samples(variant, v["roughness"], material, offset=offset,
+                                scale=v["specular"])
 
 
-def measured_presets(models=(MODEL.id, "cook_torrance")):
-    """The presets whose branch has a numpy model here: Lee's and Cook-Torrance's."""
+def preset_errors(preset, data: dict) -> dict:
+    variant, s = preset_samples(preset)
+    return report(s, data["variants"][variant]["coefficients"])
+
+
+def measured_presets():
+    """The presets whose branch has a fitted correction: Lee's and Cook-Torrance's."""
+    models = {v.model for v in VARIANTS}
     return [p for p in sorted(presets.load_all().values(), key=lambda p: p.id)
             if p.model_id in models]
 
 
 def run(progress=print) -> dict:
     """Fit every variant; return the data file's content."""
-    materials = training_materials()
-    out = {"format": 1, "model": MODEL.id,
+    out = {"format": 1,
            "about": "Generated by `make fallback-fit` (addon/lab/fallback_fit.py); do not edit.",
            "orders": ORDERS, "terms": [list(t) for t in TERMS],
-           "catalog": {p: list(MODEL.param(p).items) for p in ("distribution", "groove")},
-           "training": {"roughness": list(ROUGHNESS), "mu": list(MU), "materials": materials},
+           "catalog": catalog_items(),
+           "training": {"roughness": list(ROUGHNESS), "mu": list(MU),
+                        "materials": {m: training_materials(m) for m in catalog_items()}},
            "variants": {}, "presets": {}}
-    for distribution in MODEL.param("distribution").items:
-        for groove in MODEL.param("groove").items:
-            variant = (distribution, groove)
-            s = stack([samples(variant, r, m) for r in ROUGHNESS for m in materials])
-            c = fit(s)
-            entry = {"coefficients": c.tolist(), **report(s, c)}
-            out["variants"][key(variant)] = entry
-            progress(f"fallback fit {key(variant)}: albedo worst "
-                     f"{entry['albedo_plain']['worst']:.1%} -> {entry['albedo']['worst']:.1%}, "
-                     f"mean {entry['albedo_plain']['mean']:.2%} -> {entry['albedo']['mean']:.2%}; "
-                     f"lobe mean {entry['lobe_plain']['mean']:.1f} -> "
-                     f"{entry['lobe']['mean']:.1f} deg")
+    for variant in VARIANTS:
+        materials = training_materials(variant.model)
+        s = stack([samples(variant, r, m) for r in ROUGHNESS for m in materials])
+        c = fit(s)
+        entry = out["variants"][variant.key] = {"coefficients": c.tolist(), **report(s, c)}
+        progress(f"fallback fit {variant.key}: albedo worst "
+                 f"{entry['albedo_plain']['worst']:.1%} -> {entry['albedo']['worst']:.1%}, "
+                 f"mean {entry['albedo_plain']['mean']:.2%} -> {entry['albedo']['mean']:.2%}; "
+                 f"lobe mean {entry['lobe_plain']['mean']:.1f} -> "
+                 f"{entry['lobe']['mean']:.1f} deg")
     for p in measured_presets():
         out["presets"][p.id] = preset_errors(p, out)
     return out
 
 
-def key(variant) -> str:
-    return "/".join(variant)
+def catalog_items() -> dict:
+    """The catalog's items the variants depend on, per model (a drift check)."""
+    return {m.id: {p.id: list(p.items) for p in m.params
+                   if p.id in ("distribution", "groove", "fresnel_type")}
+            for m in (LEE, COOK_TORRANCE)}
 
 
 def write(data: dict, path=None) -> None:

@@ -51,14 +51,14 @@ def without_branch(make):
     return wrapped
 
 
-def correction_material(values: dict, distribution: str = "MULTI_GGX"):
-    """A callable making a material of Lee's correction lobe alone (fallback.lee_correction),
+def correction_material(model_id: str, values: dict, distribution: str = "MULTI_GGX"):
+    """A callable making a material of a model's correction lobe alone (fallback.correction),
     for catalog `values`; `distribution` as the branch passes it (MULTI_GGX or BECKMANN)."""
-    model = MODELS["lee_vgroove"]
+    model = MODELS[model_id]
 
     def make():
         material, tree, output = harness.new_material("correction")
         branch = fallback.Branch(tree, model, fallback.constant_sources(model, values))
-        tree.links.new(fallback.lee_correction(branch, distribution), output.inputs["Surface"])
+        tree.links.new(fallback.correction(branch, distribution), output.inputs["Surface"])
         return material
     return make

@@ -8,8 +8,8 @@ against the exact model it stands in for, and what the branch costs where OSL ru
   of pictures (exact, fallback, 4 x |difference|).
 - Cost with OSL on: the presets' grid rendered with and without the branch, alternating, the
   wall clock of the render call (scene sync and OSL JIT included).
-- Lee's correction lobe (addon/lab/fallback_fit.py): the numpy albedo and lobe errors of the
-  branch with and without it, as `make fallback-fit` stored them (tests/test_fallback_fit.py
+- Lee's and Cook-Torrance's correction lobes (addon/lab/fallback_fit.py): the numpy albedo
+  and lobe errors of the branch with and without them, as `make fallback-fit` stored them (tests/test_fallback_fit.py
   holds them to the reference).
 """
 from __future__ import annotations
@@ -128,13 +128,14 @@ def page(cfg, rows, res) -> list:
 def fit_lines() -> list:
     """The numpy errors of Lee's native branch without and with its fitted correction lobe."""
     fit = fallback.fit()
-    lines = ["### Lee's correction lobe and the presets' errors (numpy)", "",
-             "Lee's branch adds a single-scattering Glossy lobe whose colour is a polynomial in "
-             "roughness, Facing and F0 fitted to the reference (`make fallback-fit`). Albedo: "
+    lines = ["### The correction lobes and the presets' errors (numpy)", "",
+             "Lee's and Cook-Torrance's branches add a single-scattering Glossy lobe whose "
+             "colour is a polynomial in roughness, Facing and F0 fitted to the reference "
+             "(`make fallback-fit`). Albedo: "
              "relative error over the training grid (roughness "
              f"{fit['training']['roughness'][0]}-{fit['training']['roughness'][-1]}, "
-             f"{len(fit['training']['mu'])} incidences, {len(fit['training']['materials'])} "
-             "Fresnel cases: the presets' metals, dielectrics, F = 1) or the preset's "
+             f"{len(fit['training']['mu'])} incidences; Fresnel: the presets' metals, "
+             "dielectrics, and for Lee F = 1) or the preset's "
              "incidences; lobe: the angle between the mean directions of the reflected light "
              "(plain -> with the lobe). The presets' figures are what the panel and the "
              "operators tell the artist.",
@@ -154,4 +155,4 @@ def fit_lines() -> list:
         lines.append(f"| {name} | {pair(e, 'albedo', 'worst', pct)} | "
                      f"{pair(e, 'albedo', 'mean', pct)} | {pair(e, 'lobe', 'mean', deg)} | "
                      f"{pair(e, 'lobe', 'worst', deg)} |")
-    return lines + ["", "Cook-Torrance presets: their branch as it is (no correction lobe).", ""]
+    return lines + [""]
