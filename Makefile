@@ -67,7 +67,7 @@ lee-furnace: venv
 	$(PY) scripts/lee_furnace.py
 
 # The reference tables the repository carries (addon/lab/table_cache.py): make test, recording
-# which tables it reads, then those copied into addon/lab/table_seed/ (after changing the
+# which tables it reads, then those written into addon/lab/table_seed.npz (after changing the
 # numpy reference, the catalog or a test's reference inputs; about as long as make test).
 tables: venvs
 	@mkdir -p out && rm -f out/tables-used.txt

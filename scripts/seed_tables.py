@@ -1,10 +1,9 @@
-"""Refresh the reference tables the repository carries (addon/lab/table_cache.py, SEED_DIR):
-copy every entry named in RECORD (written by a `make test` run with
-MICROFACET_LAB_TABLE_RECORD=RECORD) from the user's cache, and remove the seed's other entries.
+"""Refresh the reference tables the repository carries (addon/lab/table_cache.py, SEED_PATH):
+write every entry named in RECORD (written by a `make test` run with
+MICROFACET_LAB_TABLE_RECORD=RECORD) into the archive, and nothing else.
 
     python scripts/seed_tables.py RECORD        (`make tables` runs it)
 """
-import shutil
 import sys
 from pathlib import Path
 
@@ -14,22 +13,11 @@ from addon.lab import table_cache  # noqa: E402
 
 
 def main(record: str) -> None:
-    names = sorted(set(Path(record).read_text(encoding="utf-8").split()))
+    names = Path(record).read_text(encoding="utf-8").split()
     if not names:
         raise SystemExit(f"{record} names no table: was it written by a make test run?")
-    seed = table_cache.SEED_DIR
-    seed.mkdir(exist_ok=True)
-    for name in names:
-        source = table_cache.directory() / name
-        if not (seed / name).exists():
-            if not source.exists():
-                raise SystemExit(f"{name} is in neither the cache nor the seed")
-            shutil.copyfile(source, seed / name)
-    for old in seed.glob("*.npz"):
-        if old.name not in names:
-            old.unlink()
-    size = sum(p.stat().st_size for p in seed.glob("*.npz"))
-    print(f"{len(names)} tables in {seed} ({size / 1e6:.1f} MB)")
+    size = table_cache.write_seed(names)
+    print(f"{len(set(names))} tables in {table_cache.SEED_PATH} ({size / 1e6:.2f} MB)")
 
 
 if __name__ == "__main__":

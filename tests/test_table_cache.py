@@ -14,8 +14,10 @@ def cache_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("MICROFACET_LAB_CACHE", str(tmp_path))
     monkeypatch.delenv("MICROFACET_LAB_TABLE_CACHE", raising=False)
     monkeypatch.delenv("MICROFACET_LAB_TABLE_RECORD", raising=False)
-    monkeypatch.setattr(table_cache, "SEED_DIR", tmp_path / "seed")
-    return tmp_path / "tables"
+    monkeypatch.setattr(table_cache, "SEED_PATH", tmp_path / "seed.npz")
+    table_cache._seed.cache_clear()
+    yield tmp_path / "tables"
+    table_cache._seed.cache_clear()
 
 
 def _table(seed):
@@ -98,28 +100,31 @@ def test_the_digest_covers_the_reference_sources(tmp_path, monkeypatch):
 
 def test_a_fresh_machine_reads_the_repository_seed_and_records_what_it_read(cache_dir, tmp_path,
                                                                            monkeypatch):
-    """What `make tables` writes and a fresh clone reads: an entry found in the seed is read
-    from it (not computed, not copied into the cache); a key the seed lacks (other inputs, or
-    changed code) is computed; every entry read is recorded when asked."""
-    compute, calls = _counting([_table(5)])
-    table_cache.tables("t", ("a", 1), compute)
-    seed = table_cache.SEED_DIR
-    seed.mkdir()
-    for entry in cache_dir.iterdir():
-        entry.rename(seed / entry.name)
+    """What `make tables` writes and a fresh clone reads: an entry found in the seed archive is
+    read from it bit for bit (not computed, not copied into the cache); a key the seed lacks
+    (other inputs, or changed code) is computed; every entry read is recorded when asked."""
     record = tmp_path / "record.txt"
     monkeypatch.setenv("MICROFACET_LAB_TABLE_RECORD", str(record))
+    compute, calls = _counting([_table(5), None])
+    table_cache.tables("t", ("a", 1), compute)
+    table_cache.write_seed(record.read_text().split())
+    for entry in cache_dir.iterdir():
+        entry.unlink()
+    table_cache._seed.cache_clear()
     again = table_cache.tables("t", ("a", 1), compute)
-    assert len(calls) == 1 and _same(again[0], _table(5))
+    assert len(calls) == 1 and _same(again[0], _table(5)) and again[1] is None
     assert not list(cache_dir.iterdir())
     table_cache.tables("t", ("a", 2), compute)
     assert len(calls) == 2
-    assert record.read_text().split() == [f"t-{table_cache.key('t', ('a', 1))}.npz",
-                                          f"t-{table_cache.key('t', ('a', 2))}.npz"]
+    name = f"t-{table_cache.key('t', ('a', 1))}.npz"
+    assert record.read_text().split() == [name, name, f"t-{table_cache.key('t', ('a', 2))}.npz"]
 
 
 def test_the_seed_holds_only_table_entries():
-    """addon/lab/table_seed/ (make tables): npz entries named name-key, nothing else."""
-    names = [p.name for p in table_cache.SEED_DIR.iterdir()] if table_cache.SEED_DIR.exists() else []
-    bad = [n for n in names if not (n.endswith(".npz") and len(n.rsplit("-", 1)[-1]) == 36)]
-    assert not bad, bad
+    """addon/lab/table_seed.npz (make tables): arrays named <name>-<key>/<array>, nothing else."""
+    import re
+    assert table_cache.SEED_PATH.exists(), "make tables writes it; the repository carries it"
+    with np.load(table_cache.SEED_PATH, allow_pickle=False) as data:
+        names = data.files
+    pattern = re.compile(r"^[a-z0-9_]+-[0-9a-f]{32}/(count|\d+_(x|E|Vn|Vt_over_sin))$")
+    assert names and not [n for n in names if not pattern.match(n)]

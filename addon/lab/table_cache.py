@@ -11,13 +11,13 @@ never read, only left behind. A table read back equals the one
 computed bit for bit (npz, no pickle). Set MICROFACET_LAB_TABLE_CACHE=0 to compute everything
 afresh (a cold run) without touching the cache.
 
-The repository carries the entries `make test` reads (addon/lab/table_seed/, refreshed by
-`make tables`), so a fresh clone on a fresh machine reads them instead of spending minutes of
-Monte Carlo and quadrature on them. They are looked up under the same key, after the user's
-cache: an entry whose code or inputs changed is simply not found there and is computed (and
-cached) as before, so a stale seed costs time, never a wrong table. `make tables` runs `make
-test` with MICROFACET_LAB_TABLE_RECORD naming a file that collects every entry's name, then
-copies those entries here and drops the others (scripts/seed_tables.py).
+The repository carries the entries `make test` reads, in one archive (addon/lab/
+table_seed.npz, refreshed by `make tables`), so a fresh clone on a fresh machine reads them
+instead of spending minutes of Monte Carlo and quadrature on them. They are looked up under the
+same key, after the user's cache: an entry whose code or inputs changed is simply not found
+there and is computed (and cached) as before, so a stale seed costs time, never a wrong table.
+`make tables` runs `make test` with MICROFACET_LAB_TABLE_RECORD naming a file that collects
+every entry's name, then writes those entries into the archive (write_seed).
 """
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ _ADDON = Path(__file__).resolve().parent.parent
 _SOURCES = (_ADDON / "catalog.py", _ADDON / "lab" / "table_cache.py")
 _SOURCE_DIRS = (_ADDON / "lab" / "reference",)
 _FIELDS = ("x", "E", "Vn", "Vt_over_sin")
-SEED_DIR = Path(__file__).resolve().parent / "table_seed"
+SEED_PATH = Path(__file__).resolve().parent / "table_seed.npz"
 
 
 def enabled() -> bool:
@@ -78,8 +78,38 @@ def _save(path: Path, tables) -> None:
 
 def _load(path: Path) -> list:
     with np.load(path, allow_pickle=False) as data:
-        return [MomentTable(*(data[f"{i}_{f}"] for f in _FIELDS)) if f"{i}_x" in data else None
-                for i in range(int(data["count"]))]
+        return _tables_from(data)
+
+
+def _tables_from(data, prefix: str = "") -> list:
+    """The tables of one entry from an npz mapping (its arrays' names after `prefix`)."""
+    return [MomentTable(*(data[f"{prefix}{i}_{f}"] for f in _FIELDS))
+            if f"{prefix}{i}_x" in data else None for i in range(int(data[prefix + "count"]))]
+
+
+@functools.lru_cache(maxsize=None)
+def _seed():
+    """The repository's archive of entries (arrays named "<entry>/<array>"), or None."""
+    return np.load(SEED_PATH, allow_pickle=False) if SEED_PATH.exists() else None
+
+
+def write_seed(entries, path: Path | None = None) -> int:
+    """Write the named entries (file names as recorded) into the seed archive, each from the
+    user's cache or else the current seed; returns the archive's size in bytes."""
+    arrays = {}
+    for entry in sorted(set(entries)):
+        stem = entry.removesuffix(".npz")
+        source = directory() / entry
+        if source.exists():
+            with np.load(source, allow_pickle=False) as data:
+                arrays.update({f"{stem}/{k}": data[k] for k in data.files})
+        elif _seed() is not None and f"{stem}/count" in _seed():
+            arrays.update({k: _seed()[k] for k in _seed().files if k.startswith(stem + "/")})
+        else:
+            raise FileNotFoundError(f"{entry} is in neither the cache nor the seed")
+    path = path or SEED_PATH
+    np.savez_compressed(path, **arrays)
+    return path.stat().st_size
 
 
 def tables(name: str, inputs, compute) -> list:
@@ -87,16 +117,18 @@ def tables(name: str, inputs, compute) -> list:
     seed) when it holds this name and these inputs for this code, else computed and stored."""
     if not enabled():
         return list(compute())
-    filename = f"{name}-{key(name, inputs)}.npz"
-    _record(filename)
-    for path in (directory() / filename, SEED_DIR / filename):
-        if path.exists():
-            try:
-                return _load(path)
-            except (OSError, ValueError, KeyError):
-                pass  # a damaged entry: compute it again
+    stem = f"{name}-{key(name, inputs)}"
+    _record(stem + ".npz")
+    path = directory() / f"{stem}.npz"
+    if path.exists():
+        try:
+            return _load(path)
+        except (OSError, ValueError, KeyError):
+            pass  # a damaged entry: compute it again
+    if _seed() is not None and f"{stem}/count" in _seed():
+        return _tables_from(_seed(), stem + "/")
     result = list(compute())
-    _save(directory() / filename, result)
+    _save(path, result)
     return result
 
 
