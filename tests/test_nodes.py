@@ -365,9 +365,17 @@ stats = [re.sub(r",[^,]*current", "", line.strip()) for line in printed.splitlin
                      r"|Merged|After optimization|Instance connections)", line)]
 # With OSL_OPTIONS debug=1 the optimizer lists each layer before and after optimizing: a folded
 # enum is read by no `useparam` op, a connected one is listed "param int in_<id> (...) connected".
+# Blender before 5.1 optimizes the groups on every core at once and the threads' listings
+# interleave within lines ("const float $const26 (used 154 ...min $tmp57 in_estimator )" was read
+# in a 5.0.1 listing), so a loose match once counted a `useparam` of one thread and an enum name of
+# another as one read. Only whole lines of the listing's two forms count.
+USEPARAM = re.compile(r"^ *\\d+: useparam((?: [^ \\t]+)+)\\t#", re.M)
+CONNECTED = re.compile(r"^param int in_(\\w+) \\(used [-\\d ]+ read [-\\d ]+ write [-\\d ]+\\) "
+                       r"connected$", re.M)
 enum_ids = sorted({pid for _, pid, _ in CASES})
-folding = {pid: {"useparam": len(re.findall(rf"useparam[^\\n]*\\bin_{pid}\\b", printed)),
-                 "connected": len(re.findall(rf"param int in_{pid} \\(.*\\) connected", printed))}
+reads = [arg for args in USEPARAM.findall(printed) for arg in args.split()]
+connected = CONNECTED.findall(printed)
+folding = {pid: {"useparam": reads.count(f"in_{pid}"), "connected": connected.count(pid)}
            for pid in enum_ids}
 menus = sorted({s.type for m in bpy.data.materials if m.node_tree for n in m.node_tree.nodes
                 if n.bl_idname == "ShaderNodeGroup" for s in n.inputs})
