@@ -370,8 +370,8 @@ stats = [re.sub(r",[^,]*current", "", line.strip()) for line in printed.splitlin
 # in a 5.0.1 listing), so a loose match once counted a `useparam` of one thread and an enum name of
 # another as one read. Only whole lines of the listing's two forms count.
 USEPARAM = re.compile(r"^ *\\d+: useparam((?: [^ \\t]+)+)\\t#", re.M)
-CONNECTED = re.compile(r"^param int in_(\\w+) \\(used [-\\d ]+ read [-\\d ]+ write [-\\d ]+\\) "
-                       r"connected$", re.M)
+CONNECTED = re.compile(r"^param int in_(\\w+) \\(used [-\\d ]+ read [-\\d ]+ "
+                       r"write [-\\d ]+\\) connected$", re.M)
 enum_ids = sorted({pid for _, pid, _ in CASES})
 reads = [arg for args in USEPARAM.findall(printed) for arg in args.split()]
 connected = CONNECTED.findall(printed)

@@ -34,6 +34,7 @@ where it starts below the interface.
 """
 import functools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -42,7 +43,7 @@ pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon.lab import glass_shapes, glass_trace, grid, harness  # noqa: E402
+from addon.lab import glass_shapes, glass_trace, grid, harness, table_cache  # noqa: E402
 
 IOR = 1.5
 ENV = grid.GRADIENT
@@ -169,6 +170,17 @@ TRACE_PATHS_LEE = 400_000  # a standard error near 0.15% at the bowl's edge
 
 @functools.lru_cache(maxsize=None)
 def _trace(shape, twin, roughness):
+    """(band means, their standard errors) of the twin's trace, kept in the table cache
+    (addon/lab/table_cache.py): 2-7 s of numpy each, ten of them. Keyed also by this file
+    (the twin's values) and the tracer's."""
+    inputs = (shape, twin, roughness, SHAPE_SIZE_PX, ENV, IOR, LEE_IOR, TRACE_PATHS,
+              TRACE_PATHS_LEE)
+    sources = (Path(__file__), Path(glass_trace.__file__), Path(grid.__file__))
+    return tuple(table_cache.arrays("glass_trace", inputs,
+                                    lambda: _compute_trace(shape, twin, roughness), sources))
+
+
+def _compute_trace(shape, twin, roughness):
     alpha = roughness * roughness
     _, pixels = glass_trace.band_pixels(glass_trace.layout(SHAPE_SIZE_PX))
     if twin == "lee_vgroove":

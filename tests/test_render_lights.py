@@ -16,6 +16,7 @@ residuals over sqrt(n); the threshold is Sidak-corrected over all bands (family-
 the quadrature's own error (coarse against fine nodes).
 """
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +25,7 @@ pytestmark = [pytest.mark.render, pytest.mark.compat]
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon.lab import grid, harness  # noqa: E402
+from addon.lab import grid, harness, table_cache  # noqa: E402
 from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.report.lights import point_radiance, spot_image, sun_unit  # noqa: E402
 from addon.lab.report.references import (area_lamp_term, image_world_term,  # noqa: E402
@@ -131,8 +132,8 @@ def sun_render():
     image = _render_lit_and_shadowed(ROW, LAYOUT, SAMPLES, seed=3)
     half, radiance = _large_sun()
     lit = ROW + [None] * len(ROW)
-    fine = sun_term(LAYOUT, lit, radiance, half, (24, 48))
-    coarse = sun_term(LAYOUT, lit, radiance, half, (12, 24))
+    fine = _term(sun_term, LAYOUT, lit, radiance, half, (24, 48))
+    coarse = _term(sun_term, LAYOUT, lit, radiance, half, (12, 24))
     return image, fine, float(np.abs(fine - coarse).max())
 
 
@@ -211,6 +212,17 @@ def _render_row(specs, add_light, seed, samples=AIMED_SAMPLES, cell_px=LAYOUT.ce
     return layout, image
 
 
+# What the numpy terms are computed from besides the reference (the table cache's key).
+ADDON = Path(grid.__file__).resolve().parents[1]
+TERM_SOURCES = (ADDON / "lab" / "report", ADDON / "lab" / "grid.py", ADDON / "world_spots.py")
+
+
+def _term(term, *args):
+    """A numpy reference image term(*args), kept in the table cache (addon/lab/table_cache.py):
+    Lee's sun term is about 3e6 evaluations, 20 s, on every run otherwise."""
+    return table_cache.arrays(term.__name__, args, lambda: [term(*args)], TERM_SOURCES)[0]
+
+
 def _with_quadrature_error(layout, image, term, nodes):
     fine, coarse = term(nodes), term((nodes[0] // 2, nodes[1] // 2))
     return layout, image, fine, float(np.abs(fine - coarse).max())
@@ -223,8 +235,8 @@ def _sun_row(specs, angle_deg, seed, nodes, **row):
         scene, strength=SUN_STRENGTH, angle_deg=angle_deg), seed, **row)
     half = math.radians(angle_deg) / 2
     radiance = SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
-    return _with_quadrature_error(layout, image, lambda n: sun_term(
-        layout, specs, radiance, half, n), nodes)
+    return _with_quadrature_error(layout, image, lambda n: _term(
+        sun_term, layout, specs, radiance, half, n), nodes)
 
 
 @pytest.fixture(scope="module")
@@ -281,8 +293,9 @@ def point_render():
     layout, image = _render_row(POINT_ROW, lambda scene: add_point_lamp(
         scene, POINT_POSITION, POINT_RADIUS, POINT_POWER), seed=7)
     radiance = point_radiance(POINT_POWER, POINT_RADIUS)
-    return _with_quadrature_error(layout, image, lambda n: point_lamp_term(
-        layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, n), (16, 32))
+    return _with_quadrature_error(layout, image, lambda n: _term(
+        point_lamp_term, layout, POINT_ROW, POINT_POSITION, POINT_RADIUS, radiance, n),
+        (16, 32))
 
 
 @pytest.mark.release_only
@@ -320,8 +333,8 @@ def area_render():
     rot = np.array(mathutils.Euler(AREA_ROTATION, "XYZ").to_matrix())
     u, v = rot[:, 0] * AREA_SIZE[0] / 2, rot[:, 1] * AREA_SIZE[1] / 2
     radiance = AREA_POWER / (math.pi * AREA_SIZE[0] * AREA_SIZE[1])
-    return _with_quadrature_error(layout, image, lambda n: area_lamp_term(
-        layout, POINT_ROW, AREA_CENTRE, u, v, radiance, n), (24, 24))
+    return _with_quadrature_error(layout, image, lambda n: _term(
+        area_lamp_term, layout, POINT_ROW, AREA_CENTRE, u, v, radiance, n), (24, 24))
 
 
 @pytest.mark.release_only
@@ -347,8 +360,8 @@ def lee_sun_render():
     image = _render_lit_and_shadowed(LEE_ROW, LEE_LAYOUT, LEE_SAMPLES, seed=9)
     half, radiance = _large_sun()
     lit = LEE_ROW + [None] * len(LEE_ROW)
-    return _with_quadrature_error(LEE_LAYOUT, image, lambda n: sun_term(
-        LEE_LAYOUT, lit, radiance, half, n), (16, 32))
+    return _with_quadrature_error(LEE_LAYOUT, image, lambda n: _term(
+        sun_term, LEE_LAYOUT, lit, radiance, half, n), (16, 32))
 
 
 @pytest.mark.release_only
@@ -398,7 +411,8 @@ def test_aimed_residual_matches_an_image_world_spot():
                                 17, samples=WORLD_SPOT_SAMPLES, cell_px=64)
     assert _lamp_count_in_texts() == 1  # the spot, and no lamp
     layout, image, reference, quad_err = _with_quadrature_error(
-        layout, image, lambda n: image_world_term(layout, WORLD_SPOT_ROW, radiance, n[0]), (6, 12))
+        layout, image, lambda n: _term(image_world_term, layout, WORLD_SPOT_ROW, radiance, n[0]),
+        (6, 12))
     _assert_bands_match(layout, WORLD_SPOT_ROW, image, reference, quad_err, power=0.05)
 
 
@@ -441,6 +455,6 @@ def test_a_mix_shader_factor_of_0_2_keeps_every_part_under_a_half_degree_sun():
     layout, image = _render_row(TINY_SUN_ROW, add_light, 19)
     half = math.radians(TINY_SUN_DEG) / 2
     radiance = MIX_FACTOR * SUN_STRENGTH / (math.pi * math.sin(half) ** 2)
-    layout, image, reference, quad_err = _with_quadrature_error(layout, image, lambda n: sun_term(
-        layout, TINY_SUN_ROW, radiance, half, n), (16, 32))
+    layout, image, reference, quad_err = _with_quadrature_error(layout, image, lambda n: _term(
+        sun_term, layout, TINY_SUN_ROW, radiance, half, n), (16, 32))
     _assert_bands_match(layout, TINY_SUN_ROW, image, reference, quad_err, power=0.1)

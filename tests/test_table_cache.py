@@ -120,11 +120,35 @@ def test_a_fresh_machine_reads_the_repository_seed_and_records_what_it_read(cach
     assert record.read_text().split() == [name, name, f"t-{table_cache.key('t', ('a', 2))}.npz"]
 
 
+def test_arrays_read_back_bit_for_bit_keyed_by_their_content_and_sources(cache_dir, tmp_path):
+    """Plain arrays (the lamp tests' reference images, the glass traces): read back bit for bit;
+    an input array is keyed by its content, also where its repr elides it; a change in a source
+    file the caller names is a new key."""
+    result = [np.arange(6.0).reshape(2, 3), np.array([1e-300, np.pi])]
+    compute, calls = _counting(result)
+    big = np.zeros(5000)
+    first = table_cache.arrays("a", ("x", big), compute)
+    again = table_cache.arrays("a", ("x", big.copy()), compute)
+    assert len(calls) == 1 and all(np.array_equal(a, b) and a.dtype == b.dtype
+                                   for a, b in zip(again, result))
+    assert first[0] is result[0]
+    changed = big.copy()
+    changed[2500] = 1.0  # repr(big) == repr(changed)
+    table_cache.arrays("a", ("x", changed), compute)
+    assert len(calls) == 2
+    source = tmp_path / "lab.py"
+    source.write_text("A = 1\n")
+    before = table_cache.key("a", 1, (source,))
+    source.write_text("A = 2\n")
+    table_cache.sources_digest.cache_clear()
+    assert table_cache.key("a", 1, (source,)) != before != table_cache.key("a", 1)
+
+
 def test_the_seed_holds_only_table_entries():
     """addon/lab/table_seed.npz (make tables): arrays named <name>-<key>/<array>, nothing else."""
     import re
     assert table_cache.SEED_PATH.exists(), "make tables writes it; the repository carries it"
     with np.load(table_cache.SEED_PATH, allow_pickle=False) as data:
         names = data.files
-    pattern = re.compile(r"^[a-z0-9_]+-[0-9a-f]{32}/(count|\d+_(x|E|Vn|Vt_over_sin))$")
+    pattern = re.compile(r"^[a-z0-9_]+-[0-9a-f]{32}/(count|\d+_(x|E|Vn|Vt_over_sin)|a\d+)$")
     assert names and not [n for n in names if not pattern.match(n)]

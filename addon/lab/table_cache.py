@@ -16,6 +16,11 @@ table_seed.npz, refreshed by `make tables`), so a fresh clone on a fresh machine
 instead of spending minutes of Monte Carlo and quadrature on them. They are looked up under the
 same key, after the user's cache: an entry whose code or inputs changed is simply not found
 there and is computed (and cached) as before, so a stale seed costs time, never a wrong table.
+
+Besides moment tables (`tables`), a caller may keep plain arrays (`arrays`): the numpy
+reference images of the lamp tests (Lee's sun term is 3e6 evaluations) and the glass traces of
+the back-face tests. Such a caller names the lab files its arrays are computed from beyond the
+reference (`sources`), and they join the key.
 `make tables` runs `make test` with MICROFACET_LAB_TABLE_RECORD naming a file that collects
 every entry's name, then writes those entries into the archive (write_seed).
 """
@@ -59,32 +64,67 @@ def code_digest() -> str:
     return h.hexdigest()
 
 
-def key(name: str, inputs) -> str:
-    text = "\n".join((name, repr(inputs), np.__version__, code_digest()))
-    return hashlib.sha256(text.encode()).hexdigest()[:32]
+@functools.lru_cache(maxsize=None)
+def sources_digest(sources: tuple) -> str:
+    """Hash of the named files' source (a folder: its .py files)."""
+    h = hashlib.sha256()
+    paths = [p for s in map(Path, sources)
+             for p in (sorted(s.rglob("*.py")) if s.is_dir() else [s])]
+    for path in paths:
+        h.update(os.path.relpath(path, _ADDON).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
 
 
-def _save(path: Path, tables) -> None:
-    arrays = {"count": np.array(len(tables))}
-    for i, table in enumerate(tables):
-        if table is not None:
-            arrays.update({f"{i}_{f}": getattr(table, f) for f in _FIELDS})
+def _plain(inputs):
+    """`inputs` with every array replaced by its dtype, shape and hash (an array's repr elides
+    the middle of a large one)."""
+    if isinstance(inputs, np.ndarray):
+        return ("ndarray", inputs.dtype.str, inputs.shape,
+                hashlib.sha256(np.ascontiguousarray(inputs).tobytes()).hexdigest())
+    if isinstance(inputs, (list, tuple)):
+        return type(inputs)(_plain(x) for x in inputs)
+    return inputs
+
+
+def key(name: str, inputs, sources: tuple = ()) -> str:
+    parts = [name, repr(_plain(inputs)), np.__version__, code_digest()]
+    if sources:
+        parts.append(sources_digest(tuple(str(s) for s in sources)))
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+
+
+def _save(path: Path, arrays: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     with os.fdopen(fd, "wb") as out:
         np.savez(out, **arrays)
-    os.replace(tmp, path)  # another process computing the same tables writes the same bytes
+    os.replace(tmp, path)  # another process computing the same entry writes the same bytes
 
 
-def _load(path: Path) -> list:
-    with np.load(path, allow_pickle=False) as data:
-        return _tables_from(data)
+# An entry is an npz mapping; these turn a computed result into one and back (`prefix`: the
+# entry's name in the seed archive).
+def _from_tables(tables) -> dict:
+    arrays = {"count": np.array(len(tables))}
+    for i, table in enumerate(tables):
+        if table is not None:
+            arrays.update({f"{i}_{f}": getattr(table, f) for f in _FIELDS})
+    return arrays
 
 
 def _tables_from(data, prefix: str = "") -> list:
     """The tables of one entry from an npz mapping (its arrays' names after `prefix`)."""
     return [MomentTable(*(data[f"{prefix}{i}_{f}"] for f in _FIELDS))
             if f"{prefix}{i}_x" in data else None for i in range(int(data[prefix + "count"]))]
+
+
+def _from_arrays(arrays) -> dict:
+    return {"count": np.array(len(arrays)),
+            **{f"a{i}": np.asarray(a) for i, a in enumerate(arrays)}}
+
+
+def _arrays_from(data, prefix: str = "") -> list:
+    return [data[f"{prefix}a{i}"] for i in range(int(data[prefix + "count"]))]
 
 
 @functools.lru_cache(maxsize=None)
@@ -115,20 +155,31 @@ def write_seed(entries, path: Path | None = None) -> int:
 def tables(name: str, inputs, compute) -> list:
     """compute() -> a list of MomentTable (or None), read from the cache (or the repository's
     seed) when it holds this name and these inputs for this code, else computed and stored."""
+    return _cached(name, key(name, inputs), compute, _from_tables, _tables_from)
+
+
+def arrays(name: str, inputs, compute, sources: tuple = ()) -> list:
+    """compute() -> a list of numpy arrays, cached like `tables`; `sources`: the files (or
+    folders) besides the reference that the arrays are computed from."""
+    return _cached(name, key(name, inputs, sources), compute, _from_arrays, _arrays_from)
+
+
+def _cached(name: str, digest: str, compute, encode, decode) -> list:
     if not enabled():
         return list(compute())
-    stem = f"{name}-{key(name, inputs)}"
+    stem = f"{name}-{digest}"
     _record(stem + ".npz")
     path = directory() / f"{stem}.npz"
     if path.exists():
         try:
-            return _load(path)
+            with np.load(path, allow_pickle=False) as data:
+                return decode(data)
         except (OSError, ValueError, KeyError):
             pass  # a damaged entry: compute it again
     if _seed() is not None and f"{stem}/count" in _seed():
-        return _tables_from(_seed(), stem + "/")
+        return decode(_seed(), stem + "/")
     result = list(compute())
-    _save(path, result)
+    _save(path, encode(result))
     return result
 
 
