@@ -46,7 +46,7 @@ def test_the_stated_preset_errors_are_reproduced(preset):
 def test_the_correction_lowers_the_error_of_every_variant(variant):
     c = DATA["variants"][variant.key]["coefficients"]
     s = fallback_fit.stack([fallback_fit.samples(variant, 0.65, m)
-                            for m in fallback_fit.training_materials(variant.model)])
+                            for m in fallback_fit.variant_materials(variant)])
     before = fallback_fit.summary(fallback_fit.errors(s))
     after = fallback_fit.summary(fallback_fit.errors(s, c))
     print(f"\n[fallback fit] {variant.key}: worst {before['worst']:.3f} -> {after['worst']:.3f}, "

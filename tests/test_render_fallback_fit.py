@@ -4,9 +4,9 @@ polynomial fitted in numpy (addon/lab/fallback_fit.py) and built from Blender's 
 albedo the numpy polynomial predicts, E_1(mu) max(C(r, 1 - mu, F0), 0) (Lee's times the tint;
 E_1: the single-scattering albedo of Cycles' Glossy BSDF, which is the Walter reference's). Bias
 per sphere, band of mu and channel against its noise (the per-pixel scatter), |z| < 5 (about
-1e-6 two-sided each, 135 comparisons). Would catch a coefficient wired to the wrong power,
+1e-6 two-sided each, 162 comparisons). Would catch a coefficient wired to the wrong power,
 Horner's rule in the wrong order, Facing read as mu, F0 of the wrong index (dielectric, None),
-the groove or distribution switch picking the other polynomial, or the tint dropped.
+the groove, distribution or Fresnel switch picking the other polynomial, or the tint dropped.
 """
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ from addon.catalog import MODELS  # noqa: E402
 from addon.lab import fallback_fit, fallback_scenes, grid, harness  # noqa: E402
 
 GOLD = {"n": (0.156, 0.424, 1.38), "k": (3.602, 2.472, 1.914)}
-CASES = [  # every distribution, groove and Fresnel kind, one tinted; Cook-Torrance
+CASES = [  # every distribution, groove and Fresnel kind, one tinted; Cook-Torrance's two
     ("lee_vgroove", {"roughness": 0.7, "fresnel_type": "conductor", **GOLD}),
     ("lee_vgroove", {"roughness": 0.6, "distribution": "beckmann", "fresnel_type": "dielectric",
                      "ior": 1.52}),
@@ -29,17 +29,15 @@ CASES = [  # every distribution, groove and Fresnel kind, one tinted; Cook-Torra
     ("lee_vgroove", {"roughness": 0.5, "distribution": "beckmann", "groove": "asymmetric",
                      "fresnel_type": "conductor", **GOLD}),
     ("cook_torrance", {"roughness": 0.85, "fresnel_type": "dielectric", "ior": 1.52}),
+    ("cook_torrance", {"roughness": 0.9, "fresnel_type": "conductor", **GOLD}),
 ]
 CELL, SAMPLES = 40, 64
 
 
 def predicted(model_id, values, mu):
     v = MODELS[model_id].resolve(values)
-    if model_id == "lee_vgroove":
-        variant = fallback_fit.Variant(model_id, v["distribution"], v["groove"])
-        tint = np.asarray(v["base_color"])
-    else:
-        variant, tint = fallback_fit.Variant(model_id, "beckmann"), 1.0
+    variant = fallback_fit.variant_of(model_id, v)
+    tint = np.asarray(v["base_color"]) if model_id == "lee_vgroove" else 1.0
     coefficients = fallback.fit()["variants"][variant.key]["coefficients"]
     c = np.maximum(fallback_fit.correction(coefficients, v["roughness"], (1.0 - mu)[:, None],
                                            fallback_fit.f0_of(v)[None, :]), 0.0)
