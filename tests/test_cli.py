@@ -188,8 +188,11 @@ def check_format(path: Path) -> None:
         assert jpeg_luma_dc_quantizer(data) == 2
 
 
+# x.jpeg and X.JPG differ from x.jpg only in how the add-on reads the name (the same Python on
+# every Blender): the pinned release alone runs them.
 @pytest.mark.render
-@pytest.mark.parametrize("name", ["x.png", "x.jpg", "x.jpeg", "X.JPG", "x.exr"])
+@pytest.mark.parametrize("name", ["x.png", "x.jpg", "x.exr"] + [
+    pytest.param(name, marks=pytest.mark.release_only) for name in ("x.jpeg", "X.JPG")])
 def test_format_follows_the_extension(tmp_path, name):
     out = tmp_path / "sub" / name
     proc, log = run("--preset", "gold", "--out", str(out), "--samples", "2", "--size", "8", cwd=tmp_path)
