@@ -280,8 +280,9 @@ def fit() -> dict:
 
 
 # Per model, the enum whose every item has a polynomial of its own (addon/lab/fallback_fit.py):
-# Lee's groove shape; Cook-Torrance's Fresnel (one polynomial for metals and dielectrics left
-# the metals' worst albedo error at 12.9% in numpy, one each 7.3%).
+# Lee's groove shape; Cook-Torrance's Fresnel (against one polynomial for both, in numpy:
+# gold_cook_torrance's worst albedo error 2.65% -> 1.57%, blue_rubber's 3.57% -> 3.21%; the
+# dielectrics' worst over the training set 12.9% -> 14.3% while their mean falls a little).
 FITTED_BY = {"lee_vgroove": "groove", "cook_torrance": "fresnel_type"}
 
 
