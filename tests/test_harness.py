@@ -36,6 +36,19 @@ def test_mirror_sphere_sees_the_analytic_environment():
     assert err.max() < 2e-5, err.max()  # measured 2.4e-6: float precision
 
 
+def test_seeds_rendered_in_one_scene_are_the_separate_renders():
+    """harness.render_seeds (persistent data, the shaders compiled once) gives each seed's
+    pixels exactly as a render of its own would: it would catch a seed that does not reach the
+    render, or state left over from the previous one."""
+    specs = [grid.SphereSpec("walter_reflection", {"roughness": r}, f"r={r}") for r in (0.3, 0.8)]
+    kwargs = {"cols": 2, "cell_px": 16}
+    _, together = harness.render_seeds(specs, grid.GRADIENT, 4, (1, 2), **kwargs)
+    alone = [harness.render_specs(specs, grid.GRADIENT, 4, seed=s, **kwargs)[1] for s in (1, 2)]
+    assert not np.array_equal(together[0], together[1])
+    for a, b in zip(together, alone):
+        assert np.array_equal(a, b)
+
+
 def test_compile_guard_fails_loudly_on_a_broken_shader(monkeypatch):
     harness.new_scene()
     model = MODELS["walter_reflection"]

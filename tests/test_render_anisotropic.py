@@ -64,7 +64,7 @@ def specs():
 @pytest.fixture(scope="module")
 def renders():
     env = grid.ENVIRONMENTS["gradient"]
-    ours = [harness.render_specs(specs(), env, SAMPLES, seed=s, cell_px=40)[1] for s in (1, 2)]
+    _, ours = harness.render_seeds(specs(), env, SAMPLES, (1, 2), cell_px=40)
     makers = [None if body is None else
               (lambda body=body, r=r: harness.osl_material(native_source(body, r), f"native {r}"))
               for _, body in CASES for r in ROUGHNESS]

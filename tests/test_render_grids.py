@@ -46,10 +46,8 @@ def converged(request):
     """(suite, env, layout, two seeds' images, reference, reference error image or None)."""
     suite, env = SUITES[request.param[0]], grid.ENVIRONMENTS[request.param[1]]
     tables, error_tables = suite.tables()
-    layout, image, _ = harness.render_specs(suite.specs, env, suite.samples, seed=1,
-                                            cell_px=suite.cell_px)
-    _, image2, _ = harness.render_specs(suite.specs, env, suite.samples, seed=2,
-                                        cell_px=suite.cell_px)
+    layout, (image, image2) = harness.render_seeds(suite.specs, env, suite.samples, (1, 2),
+                                                   cell_px=suite.cell_px)
     reference = grid.reference_image(layout, tables, env, moments_at)
     error = (None if error_tables is None else
              grid.reference_error_image(layout, error_tables, env, moments_at))

@@ -212,9 +212,13 @@ def _render_row(specs, add_light, seed, samples=AIMED_SAMPLES, cell_px=LAYOUT.ce
     return layout, image
 
 
-# What the numpy terms are computed from besides the reference (the table cache's key).
+# What the numpy terms are computed from besides the reference (the table cache's key): the
+# report's light terms and the modules they import, not the rest of the report (whose sections
+# change more often than these terms do).
 ADDON = Path(grid.__file__).resolve().parents[1]
-TERM_SOURCES = (ADDON / "lab" / "report", ADDON / "lab" / "grid.py", ADDON / "world_spots.py")
+TERM_SOURCES = tuple(ADDON / "lab" / "report" / f"{name}.py"
+                     for name in ("references", "lights", "config")) + (
+    ADDON / "lab" / "grid.py", ADDON / "world_spots.py")
 
 
 def _term(term, *args):

@@ -292,6 +292,30 @@ def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, col
     """Build and render a grid of SphereSpecs (or of ready-made `materials`, made by a callable
     run after the scene is reset). Returns (layout, image, seconds). `osl` False renders with
     Open Shading Language off (the node groups' native branches, addon/fallback.py)."""
+    scene, layout = _spec_scene(specs, env, samples, seed, cols, cell_px, materials, solid,
+                                max_bounces, light_sampling, osl)
+    image, seconds = render(scene, path)
+    return layout, image, seconds
+
+
+def render_seeds(specs: list, env: Environment, samples: int, seeds, **kwargs):
+    """render_specs at each of `seeds` in one scene: Cycles' persistent data keeps the scene
+    and its compiled OSL between the renders, so the shaders are compiled once (the pixels are
+    those of separate renders). Returns (layout, [image per seed])."""
+    scene, layout = _spec_scene(specs, env, samples, seeds[0], **kwargs)
+    scene.render.use_persistent_data = True
+    images_ = []
+    try:
+        for seed in seeds:
+            scene.cycles.seed = seed
+            images_.append(render(scene)[0])
+    finally:
+        scene.render.use_persistent_data = False
+    return layout, images_
+
+
+def _spec_scene(specs, env, samples, seed, cols=4, cell_px=32, materials=None, solid=False,
+                max_bounces=4, light_sampling=True, osl=True):
     count = len(specs if materials is None else materials)
     layout = GridLayout(rows=-(-count // cols), cols=cols, cell_px=cell_px)
     scene = new_scene()
@@ -302,5 +326,4 @@ def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, col
         mats = [None if make is None else make() for make in materials]
     build_grid_scene(layout, mats, env, samples, seed, max_bounces, solid, light_sampling)
     scene.cycles.shading_system = osl
-    image, seconds = render(scene, path)
-    return layout, image, seconds
+    return scene, layout
