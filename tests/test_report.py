@@ -251,7 +251,8 @@ def test_smoke_comparisons_lobes_and_rendered_spheres(smoke):
 @pytest.mark.render
 def test_smoke_fallback_section_measures_every_preset(smoke):
     """The native-branch section: a row per preset with finite albedo errors over the bands
-    of mu, the look's error, the picture, and the OSL-on cost of both variants."""
+    of mu, the look's error, the picture, and the OSL-on cost of both variants, for all the
+    presets and for a model's alone (the smoke run times one model)."""
     from addon import presets
 
     out, _ = smoke
@@ -263,6 +264,12 @@ def test_smoke_fallback_section_measures_every_preset(smoke):
         assert len(e["albedo"]) >= 2 and len(e["gradient"]) == 3, e
         assert np.isfinite([b["error"] + b["noise"] for b in e["albedo"]]).all(), e
         assert re.search(rf"\| {e['preset']} \| .+ \| {NUMBER}% \| {NUMBER}% \| {NUMBER}% \|", page)
-    assert data["cost"]["with"] and data["cost"]["without"]
+    cost = data["cost"]
+    assert cost["models"] and cost["models"].keys() <= {e["model"] for e in data["presets"]}
+    for name, c in [("all", cost)] + list(cost["models"].items()):
+        assert c["with"] and c["without"] and c["spheres"] > 0, name
+        assert re.search(rf"\| {name} \| {c['spheres']} \| {NUMBER} \| {NUMBER} \| {NUMBER} \|",
+                         page), name
+    for model_id, c in cost["models"].items():  # each model's presets, and only those
+        assert c["spheres"] == sum(e["model"] == model_id for e in data["presets"]), model_id
     assert (out / "fallback.png").stat().st_size > 1000
-    assert re.search(rf"ratio {NUMBER}\.", page)

@@ -6,8 +6,8 @@ against the exact model it stands in for, and what the branch costs where OSL ru
   difference (the scatter of the per-pixel differences of the two renders over sqrt(n)).
 - The look: both under the gradient world, the relative error of each sphere's mean, and a row
   of pictures (exact, fallback, 4 x |difference|).
-- Cost with OSL on: the presets' grid rendered with and without the branch, alternating, the
-  wall clock of the render call (scene sync and OSL JIT included).
+- Cost with OSL on: the presets' grid, and each model's presets alone, rendered with and without
+  the branch, alternating; the wall clock of the render call (scene sync and OSL JIT included).
 - Lee's and Cook-Torrance's correction lobes (addon/lab/fallback_fit.py): the numpy albedo
   and lobe errors of the branch with and without them, as `make fallback-fit` stored them (tests/test_fallback_fit.py
   holds them to the reference).
@@ -50,7 +50,7 @@ def _sphere_means(layout, image):
 
 
 def compute(cfg, rows, tables, progress, notes, out) -> dict:
-    from ..fallback_scenes import preset_material, without_branch
+    from ..fallback_scenes import preset_material
     from ..images import write_png
 
     samples, cell, repeats = _settings(cfg.mode)
@@ -77,16 +77,42 @@ def compute(cfg, rows, tables, progress, notes, out) -> dict:
     write_png(out / "fallback.png", np.concatenate(
         [to_display(exact), to_display(approx), to_display(4.0 * np.abs(approx - exact))], axis=0))
 
-    seconds = {True: [], False: []}
-    for _ in range(repeats):
-        for branch in (True, False):
-            mats = made if branch else [without_branch(m) for m in made]
-            seconds[branch].append(_render(mats, grid.GRADIENT, samples, cell, 3, True, cols)[2])
-    cost = {"with": seconds[True], "without": seconds[False], "samples": samples,
-            "spheres": len(chosen)}
-    progress(f"fallback: OSL-on cost with / without the branch "
-             f"{np.median(seconds[True]) / np.median(seconds[False]):.3f}")
+    cost = _cost(chosen, made, samples, cell, repeats, cols, cfg.mode == "smoke")
+    ratios = ", ".join(f"{m} {_ratio(c):.3f}" for m, c in cost["models"].items())
+    progress(f"fallback: OSL-on cost with / without the branch: all {_ratio(cost):.3f}; {ratios}")
     return {"fallback": {"presets": entries, "cost": cost, "samples": samples, "cell_px": cell}}
+
+
+def _cost(chosen, made, samples, cell, repeats, cols, smoke=False) -> dict:
+    """Render-call seconds with and without the branch, alternating: the presets' whole grid,
+    then each model's presets alone (scene sync and OSL JIT included, as an artist pays them).
+    The smoke run times one model alone, the one with the fewest presets (its figures are noise
+    at 8 samples; the per-model JITs would double its time)."""
+    from ..fallback_scenes import without_branch
+
+    def timed(mats):
+        seconds = {True: [], False: []}
+        for _ in range(repeats):
+            for branch in (True, False):
+                grid_mats = mats if branch else [without_branch(m) for m in mats]
+                seconds[branch].append(_render(grid_mats, grid.GRADIENT, samples, cell, 3, True,
+                                               cols)[2])
+        return {"with": seconds[True], "without": seconds[False], "spheres": len(mats)}
+
+    cost = timed(made)
+    cost["samples"] = samples
+    cost["models"] = {}
+    model_ids = list(dict.fromkeys(p.model_id for p in chosen))
+    if smoke:
+        model_ids = [min(model_ids, key=[p.model_id for p in chosen].count)]
+    for model_id in model_ids:
+        cost["models"][model_id] = timed([m for p, m in zip(chosen, made)
+                                          if p.model_id == model_id])
+    return cost
+
+
+def _ratio(cost) -> float:
+    return float(np.median(cost["with"]) / np.median(cost["without"]))
 
 
 def _worst(entry):
@@ -101,7 +127,6 @@ def page(cfg, rows, res) -> list:
     if not data:
         return []
     cost = data["cost"]
-    ratio = np.median(cost["with"]) / np.median(cost["without"])
     lines = ["## Without OSL: the native branch against the exact model", "",
              f"Every preset rendered exact (OSL) and as its native branch (OSL off), "
              f"{data['samples']} samples, spheres of {data['cell_px']} px. Albedo: the white "
@@ -118,11 +143,17 @@ def page(cfg, rows, res) -> list:
         lines.append(f"| {e['preset']} | {e['model']} | {e['native']} | {100 * worst:.1f}% | "
                      f"{100 * mean:.1f}% | {100 * noise:.1f}% | {look} |")
     lines += ["", "![exact, native branch, 4 x difference](fallback.png)", "",
-              f"Cost where OSL runs: the {cost['spheres']} presets' grid, {cost['samples']} "
-              f"samples, render call with the branch {np.median(cost['with']):.2f} s, without "
-              f"{np.median(cost['without']):.2f} s (medians of {len(cost['with'])} alternating "
-              f"runs): ratio {ratio:.3f}.", ""]
-    return lines + fit_lines()
+              f"Cost where OSL runs: the render call (scene sync, OSL JIT and {cost['samples']} "
+              f"samples) with and without the branch, medians of {len(cost['with'])} alternating "
+              "runs, for the presets' whole grid and for each model's presets alone. With "
+              "unlinked inputs the branch is folded away before rendering; what it can cost is "
+              "its nodes' sync and the shader group's size.", "",
+              "| presets | spheres | with the branch (s) | without (s) | ratio |",
+              "|---|---|---|---|---|"]
+    for name, c in [("all", cost)] + list(cost.get("models", {}).items()):
+        lines.append(f"| {name} | {c['spheres']} | {np.median(c['with']):.2f} | "
+                     f"{np.median(c['without']):.2f} | {_ratio(c):.3f} |")
+    return lines + [""] + fit_lines()
 
 
 def fit_lines() -> list:
