@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # make test on 2 cores: two pytest lanes side by side, which share no files (no pytest cache,
 # separate temporary folders).
-#   lane 1: the render tests on the pinned release (Cycles renders on both cores);
-#   lane 2: the tests that do not render (numpy, mostly one core) on the pinned release, then
+#   lane 1: the render tests on the pinned release (Cycles renders on both cores), and the few
+#           that do not render marked `render_lane` (tests/conftest.py: the lanes' balance);
+#   lane 2: the other tests that do not render (numpy, mostly one core) on the pinned release, then
 #           the compatibility suite (-m "compat and not release_only") on each older Blender
 #           whose Python follows --compat, one after the other.
 # Lane 1's output streams; lane 2's is printed when both are done. Fails if any run fails.
@@ -37,7 +38,7 @@ version() { "$1" -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null; }
 lane2() {
   local rc=0 p
   echo "== the tests that do not render, Blender $(version "$py") (beside the render tests)"
-  "$py" -m pytest "${opts[@]}" -m "not render" "$@" tests
+  "$py" -m pytest "${opts[@]}" -m "not render and not render_lane" "$@" tests
   ok $? || rc=1
   for p in "${compat[@]}"; do
     echo "== compatibility suite on Blender $(version "$p")"
@@ -51,7 +52,7 @@ start=$SECONDS
 lane2 "$@" >"$log" 2>&1 &
 other=$!
 echo "== the render tests, Blender $(version "$py")"
-"$py" -m pytest "${opts[@]}" --durations=15 -m render "$@" tests
+"$py" -m pytest "${opts[@]}" --durations=15 -m "render or render_lane" "$@" tests
 render_rc=$?
 echo "== lane 1 (render tests) done after $((SECONDS - start)) s"
 wait "$other"

@@ -6,12 +6,17 @@
   marks itself); `release_only` takes a test of such a module out of it, where it checks
   the same maths on every version and the pinned release's run is enough.
 
+- `render_lane`: does not render, but `make test` runs it in the render lane to balance the two
+  lanes (in two fresh clones the other lane finished 74 and 77 s after the render lane; these
+  modules take about 30 s). Set below by module.
+
 A test that uses a fixture which renders is a render test whatever its own marks say, so the
 two lanes never both pay for one fixture (the report's smoke run is two minutes).
 """
 import pytest
 
 RENDERING_FIXTURES = {"smoke"}  # tests/test_report.py: the report's smoke run
+RENDER_LANE_MODULES = {"test_reference_controls.py", "test_stability.py"}
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -19,3 +24,5 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if RENDERING_FIXTURES & set(item.fixturenames):
             item.add_marker(pytest.mark.render)
+        if item.path.name in RENDER_LANE_MODULES:
+            item.add_marker(pytest.mark.render_lane)
