@@ -145,9 +145,9 @@ def page(cfg, rows, res) -> list:
     lines += ["", "![exact, native branch, 4 x difference](fallback.png)", "",
               f"Cost where OSL runs: the render call (scene sync, OSL JIT and {cost['samples']} "
               f"samples) with and without the branch, medians of {len(cost['with'])} alternating "
-              "runs, for the presets' whole grid and for each model's presets alone. With "
-              "unlinked inputs the branch is folded away before rendering; what it can cost is "
-              "its nodes' sync and the shader group's size.", "",
+              "runs, for the presets' whole grid and for each model's presets alone. Where OSL "
+              "runs the branch's closures are weighted 0 and dropped; what the branch can cost "
+              "is its nodes' sync and their evaluation in the shader.", "",
               "| presets | spheres | with the branch (s) | without (s) | ratio |",
               "|---|---|---|---|---|"]
     for name, c in [("all", cost)] + list(cost.get("models", {}).items()):
