@@ -24,7 +24,7 @@ COMPAT ?= 4.2 4.5 5.0
 # and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
-.PHONY: venv venvs test test-full test-compat test-fast demo report package thumbnails lee-furnace fallback-fit tables clean
+.PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails lee-furnace fallback-fit tables clean
 
 venv:
 	@$(VENV_SH) requirements.txt >/dev/null
@@ -59,6 +59,13 @@ report: venv
 
 package: venv
 	$(PY) scripts/build_package.py
+
+# The presets' asset library the extension ships (assets/: addon/lab/assets.py): previews
+# rendered on the pinned release, the .blend written by Blender 4.2, which every later version
+# reads (after a change to presets/, the catalog or a shader; about two minutes).
+assets: venvs
+	$(PY) scripts/build_assets.py previews
+	$$($(VENV_SH) tests/compat/requirements-4.2.txt) scripts/build_assets.py library
 
 thumbnails: venv
 	$(PY) scripts/render_scene.py --all --thumbnails out/presets

@@ -11,16 +11,20 @@ alone); `register()` imports the bpy-side modules.
 
 
 def register():
-    from . import handover, notice, preset_ui, ui
+    from . import adopt, asset_browser, handover, notice, preset_ui, ui
     ui.register()
     preset_ui.register()
+    asset_browser.register()
     handover.register()
+    adopt.register()
     notice.register()
 
 
 def unregister():
-    from . import handover, notice, preset_ui, ui
+    from . import adopt, asset_browser, handover, notice, preset_ui, ui
     notice.unregister()
+    adopt.unregister()
     handover.unregister()
+    asset_browser.unregister()
     preset_ui.unregister()
     ui.unregister()

@@ -25,6 +25,7 @@ from . import compat, fallback, shader_nodes, shaders
 from .catalog import COLOR, ENUM, FACTOR, MODELS, VECTOR, Model, Param
 
 GROUP_PREFIX = "Microfacet Lab: "
+MODEL_KEY = "microfacet_lab_model"  # custom property: the catalog model a group was built for
 SCRIPT_NODE_NAME = "Microfacet Lab OSL"
 MENU_NODE_PREFIX = "Microfacet Lab menu: "  # + the parameter id
 
@@ -103,6 +104,7 @@ def build_group(model: Model, menus: bool | None = None, native: bool = True):
         group.interface.clear()
     group.description = model.doc
     group.color_tag = "SHADER"
+    group[MODEL_KEY] = model.id
     for param in model.params:
         _new_input(group, param, menus)
     group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
@@ -189,6 +191,34 @@ def socket_value(sock, param: Param, value):
     if param.kind == COLOR:
         return tuple(value) if sock.type == "VECTOR" else (*value, 1.0)
     return value
+
+
+def input_value(sock, param: Param):
+    """The catalog value a group input holds (socket_value's inverse): an enum's item id from a
+    menu's label or an integer's code, RGB from a colour or vector, a float."""
+    value = sock.default_value
+    if param.kind == ENUM:
+        if sock.type == "MENU":
+            return param.items[param.item_labels.index(value)]
+        return param.items[min(max(int(value), 0), len(param.items) - 1)]
+    if param.kind == COLOR:
+        return tuple(float(c) for c in tuple(value)[:3])
+    return float(value)
+
+
+def read_inputs(node, model: Model) -> dict:
+    """Catalog values (enum items by id) of a Microfacet Lab group node's inputs."""
+    return {param.id: input_value(node.inputs[param.label], param) for param in model.params}
+
+
+def model_of(group) -> Model | None:
+    """The catalog model a Microfacet Lab group was built for (by its tag, or by its name for a
+    group saved before the tag), or None for any other group."""
+    model = MODELS.get(group.get(MODEL_KEY, ""))
+    if model is not None:
+        return model
+    name = group.name.rsplit(".", 1)[0] if group.name[-4:-3] == "." else group.name
+    return next((m for m in MODELS.values() if group_name(m) == name), None)
 
 
 def set_inputs(node, model: Model, resolved: dict) -> None:

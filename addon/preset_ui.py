@@ -18,7 +18,7 @@ from pathlib import Path
 
 import bpy
 
-from . import compat, fallback, nodes, presets
+from . import asset_library, asset_browser, compat, fallback, nodes, presets
 from .ui import osl_render_problem
 
 PRESET_PROP = "microfacet_lab_preset"  # on WindowManager: the panel's gallery selection
@@ -51,7 +51,9 @@ def _material_name(preset) -> str:
     return NAME_PREFIX + preset.label
 
 
-def _new_material(preset):
+def new_material(preset):
+    """A new material made of one group node with the preset's values, tagged with the preset
+    (what Apply creates, and what the asset library holds: addon/lab/assets.py)."""
     material = compat.new_node_material(_material_name(preset))
     tree = material.node_tree
     for node in list(tree.nodes):
@@ -60,6 +62,7 @@ def _new_material(preset):
     output.location = (300, 0)
     node = nodes.add_group_node(tree, preset.model_id, preset.params)
     tree.links.new(node.outputs["BSDF"], output.inputs["Surface"])
+    material[MATERIAL_KEY] = preset.id
     return material
 
 
@@ -72,7 +75,7 @@ def apply_preset(obj, preset) -> tuple:
     material = obj.active_material
     node = lab_node(material)
     if node is None:
-        material = _new_material(preset)
+        material = new_material(preset)
         if len(obj.material_slots) == 0:
             obj.data.materials.append(material)
         else:
@@ -110,7 +113,7 @@ def _dir_key(directory: Path):
 
 def _icon(preset_id: str) -> int:
     global _previews
-    for folder in presets.thumbnail_dirs():
+    for folder in asset_library.preview_dirs():
         path = folder / f"{preset_id}.png"
         if path.is_file():
             try:
@@ -251,6 +254,7 @@ class MATERIAL_PT_microfacet_lab_presets(bpy.types.Panel):
             op.preset = preset.id
         for error in cache["errors"]:
             layout.label(text=str(error)[:120], icon="ERROR")
+        asset_browser.draw(layout, context)
         layout.separator()
         layout.operator(SCENE_OT_microfacet_lab_specialize.bl_idname, icon="RENDER_STILL")
 

@@ -20,7 +20,7 @@ id; everything it leaves out takes the catalog default. The file's stem is the p
 Validation never clamps: an unknown model, an unknown key or parameter, a wrong type, a value
 outside the catalog's range or an unknown enum item is a PresetError naming the file and the
 field. Files are parsed with the standard library's tomllib; nothing in them is executed.
-No bpy here: the thumbnail renderer imports the harness when it is called.
+No bpy here.
 """
 from __future__ import annotations
 
@@ -197,9 +197,3 @@ def find(preset_id: str, directory=PRESETS_DIR) -> Preset:
         raise PresetError(path, "(file)", f"no preset {preset_id!r}; known: {known}")
     return load_preset(path)
 
-
-# --- thumbnails (rendered by the lab: addon/lab/thumbnails.py) ---------------------------------
-
-def thumbnail_dirs() -> list[Path]:
-    """Where the UI looks for <preset id>.png: shipped thumbnails, then `out/presets`."""
-    return [PRESETS_DIR / "thumbnails", PRESETS_DIR.parent / "out" / "presets"]

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 ADDON = ROOT / "addon"
 # bpy half -> its pure half.
 HALVES = {"shader_nodes": "shaders", "handover": "lamps", "world_lights": "world_spots",
-          "preset_ui": "presets"}
+          "preset_ui": "presets", "asset_browser": "asset_library"}
 
 
 def _tree(name):

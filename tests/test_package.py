@@ -3,11 +3,12 @@
 The zip is built once (module fixture) by scripts/build_package.py, which runs the extension tool
 bundled in the bpy wheel. It must hold exactly the Python modules the add-on imports at run time
 (found by following the imports of the entry point, including those inside functions), plus osl/,
-presets/, README and LICENSE: no verification lab (addon/lab/), no tests, scripts or docs. The
+presets/, assets/ (the presets' asset library), README and LICENSE: no verification lab (addon/lab/), no tests, scripts or docs. The
 install test runs Blender's own "Install from Disk" operator in a separate process with a
 throw-away user resource directory, then registers, builds every model's node group and applies
-every preset from the INSTALLED copy (bl_ext.user_default.microfacet_lab), so a file missing from
-the zip shows up as an import, OSL compile or preset failure.
+every preset from the INSTALLED copy (bl_ext.user_default.microfacet_lab), and adds its asset
+library to the Asset Browser, so a file missing from the zip shows up as an import, OSL compile,
+preset or asset failure. The zip's size is printed (the note and README quote it).
 """
 from __future__ import annotations
 
@@ -119,12 +120,12 @@ def test_zip_contents(package):
     assert not [n for n in names if n.startswith(("addon/lab", "tests/", "scripts/", "docs/"))]
     for model in MODELS.values():
         assert f"osl/{model.shader}.osl" in files
-    for sub in ("osl", "presets"):
+    for sub in ("osl", "presets", "assets"):
         shipped = {p.relative_to(ROOT).as_posix() for p in (ROOT / sub).rglob("*")
                    if p.is_file() and not any(part.startswith(".") for part in p.parts)}
         assert shipped <= files, shipped - files
-    allowed_top = {"__init__.py", "blender_manifest.toml", "addon", "osl", "presets", "README.md",
-                   "LICENSE"}
+    allowed_top = {"__init__.py", "blender_manifest.toml", "addon", "osl", "presets", "assets",
+                   "README.md", "LICENSE"}
     for name in files:
         top = name.split("/")[0]
         assert top in allowed_top, f"unexpected file in package: {name}"
@@ -134,6 +135,13 @@ def test_zip_contents(package):
             assert name.endswith(".py") or name in ADDON_DATA, f"unexpected under addon/: {name}"
     assert {"README.md", "LICENSE"} <= files
     assert ADDON_DATA <= files
+    with zipfile.ZipFile(package) as zf:
+        sizes = {}
+        for info in zf.infolist():
+            top = info.filename.split("/")[0]
+            sizes[top] = sizes.get(top, 0) + info.compress_size
+    print(f"\n[package] zip {package.stat().st_size / 1024:.0f} KB; compressed by folder (KB): "
+          + ", ".join(f"{k} {v / 1024:.0f}" for k, v in sorted(sizes.items())))
 
 
 def test_license_is_the_gpl3_the_manifest_declares():
@@ -201,6 +209,16 @@ for preset_id in sorted(presets.load_all()):
                           "key": mat.get("microfacet_lab_preset") if mat else None}
 out["presets_dir"] = str(presets.PRESETS_DIR)
 out["applied"] = applied
+
+# The asset library, added to the Asset Browser by the installed operator.
+out["library_op"] = sorted(bpy.ops.preferences.microfacet_lab_add_asset_library())
+libraries = [(lib.name, lib.path) for lib in bpy.context.preferences.filepaths.asset_libraries]
+out["libraries"] = libraries
+blend = os.path.join(libraries[-1][1], "Microfacet Lab presets.blend")
+with bpy.data.libraries.load(blend, link=True, assets_only=True) as (src, dst):
+    dst.materials = list(src.materials)
+out["assets"] = sorted(m.get("microfacet_lab_preset") for m in dst.materials
+                       if m.asset_data is not None and m.preview is not None)
 report(out)
 '''
 
@@ -231,6 +249,10 @@ def test_install_in_fresh_blender(package, tmp_path):
     for preset_id, applied in out["applied"].items():
         assert applied["result"] == ["FINISHED"], f"{preset_id}: {applied}\n{log}"
         assert applied["key"] == preset_id and applied["material"], f"{preset_id}: {applied}"
+    assert out["library_op"] == ["FINISHED"], log
+    name, path = out["libraries"][-1]
+    assert name == "Microfacet Lab" and Path(path).resolve() == (installed / "assets").resolve(), log
+    assert out["assets"] == shipped, log
 
 
 def test_build_script_cli(tmp_path):

@@ -1,7 +1,7 @@
 """Preset thumbnails: each preset rendered on one sphere of the lab's sphere grid.
 
 Development tooling (`scripts/render_scene.py --thumbnails DIR`): the add-on only looks the
-pictures up (`presets.thumbnail_dirs`), it never renders them.
+pictures up (`asset_library.preview_dirs`), it never renders them.
 """
 from __future__ import annotations
 
