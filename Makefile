@@ -24,7 +24,7 @@ COMPAT ?= 4.2 4.5 5.0
 # and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
-.PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails lee-furnace fallback-fit tables clean
+.PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails bench-animation lee-furnace fallback-fit tables clean
 
 venv:
 	@$(VENV_SH) requirements.txt >/dev/null
@@ -66,6 +66,11 @@ package: venv
 assets: venvs
 	$(PY) scripts/build_assets.py previews
 	$$($(VENV_SH) tests/compat/requirements-4.2.txt) scripts/build_assets.py library
+
+# What the lamps' hand-over costs an animation, and the HDRI sun search's time and memory
+# (addon/lab/bench_animation.py; about 10 minutes).
+bench-animation: venv
+	$(PY) scripts/bench_animation.py
 
 thumbnails: venv
 	$(PY) scripts/render_scene.py --all --thumbnails out/presets

@@ -11,6 +11,7 @@ exactly, with more noise under their spots (docs/light-sampling.md).
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -84,37 +85,120 @@ def _lookup_rotation(texture):
     return np.array(Euler(rotation, "XYZ").to_matrix())
 
 
+def _file_path(image):
+    """The file an image is read from, or None (packed, generated, edited in Blender)."""
+    if image.source != "FILE" or image.packed_file is not None or image.is_dirty:
+        return None
+    import bpy
+
+    return bpy.path.abspath(image.filepath, library=image.library)
+
+
 def _image_key(image):
-    return (getattr(image, "session_uid", None), image.name_full, image.filepath_raw,
-            tuple(image.size), image.source)
+    """What identifies an image's pixels, read without loading them (Image.size loads the image
+    into Blender's memory: a file's size and time stand for it)."""
+    path = _file_path(image)
+    try:
+        stamp = None if path is None else (os.stat(path).st_mtime_ns, os.stat(path).st_size)
+    except OSError:
+        stamp = None
+    content = stamp if stamp is not None else tuple(image.size)
+    return (getattr(image, "session_uid", None), image.name_full, image.filepath_raw, content,
+            image.source)
 
 
-def _image_luminance(image):
-    """(H, W) linear luminance of a loaded image, or None."""
+BANDS = 64  # the sun search reads an HDRI in this many bands of rows (one at a time)
+
+
+def _band_rows(height: int) -> int:
+    return max(8, -(-height // BANDS))
+
+
+def _srgb_to_linear(x):
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def _band_luminance(pixels, srgb: bool):
+    """Luminance of (rows, W, >=3) pixels, float32 (the sun search needs no more)."""
+    rgb = pixels[..., :3]
+    if srgb:
+        rgb = _srgb_to_linear(rgb)
+    return world_spots.luminance(rgb.astype(np.float32, copy=False))
+
+
+def _is_srgb(image, as_stored: bool) -> bool:
+    """Whether values are sRGB-encoded: in the file whenever the image's colour space is sRGB
+    (`as_stored`); in Blender's copy only for 8-bit images (it makes float ones linear)."""
+    srgb = image.colorspace_settings.name.lower().startswith("srgb")
+    return srgb and (as_stored or not image.is_float)
+
+
+def _file_bands(image):
+    """(height, width, bands) of an image read from its file by the OpenImageIO inside Blender,
+    one band of rows at a time (rows counted from the bottom, as Blender stores them); None where
+    that cannot be done (no OpenImageIO, a packed, generated, edited or missing image)."""
+    path = _file_path(image)
+    if path is None:
+        return None
+    compat.expose_bundled_modules()
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return None
+    reader = oiio.ImageInput.open(path)
+    if reader is None:
+        return None
+    spec = reader.spec()
+    if spec.nchannels < 3 or spec.width * spec.height == 0 or spec.depth > 1:
+        reader.close()
+        return None
+    height, width, srgb = spec.height, spec.width, _is_srgb(image, as_stored=True)
+
+    def bands():
+        try:
+            step = _band_rows(height)
+            for top in range(0, height, step):
+                end = min(top + step, height)
+                pixels = reader.read_scanlines(0, 0, top, end, 0, 0, 3, oiio.FLOAT)
+                if pixels is None or len(pixels) != end - top:
+                    raise RuntimeError(f"OpenImageIO could not read {path}: {oiio.geterror()}")
+                yield height - end, _band_luminance(np.asarray(pixels)[::-1], srgb)
+        finally:
+            reader.close()
+    return height, width, bands()
+
+
+def _pixel_bands(image):
+    """(height, width, bands) of an image's pixels as Blender holds them (one float32 copy)."""
     width, height = image.size
     channels = image.channels
     if width * height == 0 or channels < 3:
         return None
     flat = np.empty(width * height * channels, dtype=np.float32)
     image.pixels.foreach_get(flat)
-    rgb = flat.reshape(height, width, channels)[..., :3].astype(np.float64)
-    if not image.is_float and image.colorspace_settings.name.lower().startswith("srgb"):
-        rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
-    return world_spots.luminance(rgb)
+    pixels = flat.reshape(height, width, channels)
+    srgb = _is_srgb(image, as_stored=False)
+    step = _band_rows(height)
+    return height, width, ((row, _band_luminance(pixels[row:row + step], srgb))
+                           for row in range(0, height, step))
 
 
 def image_spots(image) -> list:
-    """world_spots.image_spots of an image, cached; [] when it cannot be read."""
+    """world_spots.band_spots of an image, cached; [] when it cannot be read. An image file is
+    read in bands by OpenImageIO, so Blender does not load it; else its pixels are copied once."""
     key = _image_key(image)
     if key not in _IMAGE_CACHE:
         had_data = image.has_data
+        spots = []
         try:
-            lum = _image_luminance(image)
-        except (RuntimeError, ValueError, MemoryError):
-            lum = None
-        if not had_data:
+            found = _file_bands(image) or _pixel_bands(image)
+            if found is not None:
+                spots = world_spots.band_spots(found[2], found[0], found[1])
+        except (RuntimeError, ValueError, MemoryError, OSError):
+            spots = []
+        if not had_data and image.has_data:
             image.buffers_free()  # do not keep a second copy of an image only Cycles needs
-        _IMAGE_CACHE[key] = [] if lum is None else world_spots.image_spots(lum)
+        _IMAGE_CACHE[key] = spots
     return _IMAGE_CACHE[key]
 
 

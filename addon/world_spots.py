@@ -45,7 +45,10 @@ def row_solid_angles(height: int, width: int) -> np.ndarray:
 
 def luminance(pixels: np.ndarray) -> np.ndarray:
     """Rec. 709 luminance of (H, W, >=3) linear pixels; NaN, infinite and negative values as 0."""
-    lum = np.tensordot(np.asarray(pixels[..., :3], dtype=np.float64), LUMINANCE, axes=1)
+    rgb = np.asarray(pixels)[..., :3]
+    if rgb.dtype != np.float32:  # float32 stays so (an HDRI's band); anything else in float64
+        rgb = rgb.astype(np.float64)
+    lum = np.tensordot(rgb, np.asarray(LUMINANCE, dtype=rgb.dtype), axes=1)
     lum = np.nan_to_num(lum, nan=0.0, posinf=0.0, neginf=0.0)
     return np.maximum(lum, 0.0)
 
@@ -73,24 +76,53 @@ def image_spots(lum: np.ndarray, max_spots: int = MAX_SPOTS) -> list:
     """The bright spots of an equirectangular luminance image (H, W), brightest first: a list of
     (axis, half-angle, power), power the spot's irradiance at normal incidence (its luminance
     integrated over its solid angle, as a sun lamp's strength)."""
-    lum = np.asarray(lum, dtype=np.float64)
-    height, width = lum.shape
-    energy = lum * row_solid_angles(height, width)[:, None]
-    total = float(energy.sum())
+    lum = np.asarray(lum)
+    return band_spots([(0, lum)], *lum.shape, max_spots=max_spots)
+
+
+def band_spots(bands, height: int, width: int, max_spots: int = MAX_SPOTS) -> list:
+    """image_spots of an image read in bands of rows: `bands` yields (first row, (rows, W)
+    luminance), rows counted from the bottom, in any order. Holds one band and the bright
+    pixels at a time, not the image: a pixel is bright against the world's mean, known only
+    at the end, so after each band only the pixels over the mean seen so far are kept (a lower
+    bound: a superset), 8 bytes each, and the final mean sorts them (the same pixels as the
+    whole image's)."""
+    omega = row_solid_angles(height, width)
+    total, chunks = 0.0, []  # chunks: (flat pixel index int32, luminance float32) of bright pixels
+    for first, band in bands:
+        band = np.maximum(np.nan_to_num(np.asarray(band, dtype=np.float32), nan=0.0, posinf=0.0,
+                                        neginf=0.0), 0.0)
+        total += float(band.sum(1, dtype=np.float64) @ omega[first:first + len(band)])
+        index = np.flatnonzero(band > _bright(total))
+        chunks.append(((index + first * width).astype(np.int32), band.ravel()[index]))
+        chunks = [(i[v > _bright(total)], v[v > _bright(total)]) for i, v in chunks]
     if not math.isfinite(total) or total <= 0.0:
         return []
-    rows, cols = np.nonzero(lum > SPOT_CONTRAST * total / (4.0 * math.pi))
+    index = np.concatenate([i for i, _ in chunks]) if chunks else np.empty(0, np.int32)
+    lum = np.concatenate([v for _, v in chunks]).astype(np.float64) if chunks else np.empty(0)
+    rows, cols = np.divmod(index.astype(np.int64), width)
+    return _group_spots(rows, cols, lum, omega, height, width, total, max_spots)
+
+
+def _bright(total: float) -> float:
+    """The luminance over which a pixel may belong to a spot, for a world of power `total`."""
+    return SPOT_CONTRAST * total / (4.0 * math.pi)
+
+
+def _group_spots(rows, cols, lum, omega, height, width, total, max_spots):
+    """Spots from the bright pixels (rows, cols) of luminance `lum`: the brightest pixel and the
+    bright pixels near it make a spot, while it carries enough of the world's power."""
+    energy = lum * omega[rows]
     spots = []
     while len(rows) and len(spots) < max_spots:
-        top = int(np.argmax(lum[rows, cols]))
+        top = int(np.argmax(lum))
         centres = equirect_direction((cols + 0.5) / width, (rows + 0.5) / height)
         near = centres @ centres[top] >= math.cos(MAX_SPOT_HALF_ANGLE)
-        axis, half, power = _spot(rows[near], cols[near], energy[rows[near], cols[near]],
-                                  height, width)
+        axis, half, power = _spot(rows[near], cols[near], energy[near], height, width)
         if power < MIN_SPOT_SHARE * total:
             break
         spots.append((axis, half, power))
-        rows, cols = rows[~near], cols[~near]
+        rows, cols, lum, energy = rows[~near], cols[~near], lum[~near], energy[~near]
     return spots
 
 
