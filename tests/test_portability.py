@@ -80,3 +80,66 @@ def test_saved_material_renders_identically_without_the_addon(tmp_path, osl):
     # The spheres are not black: the shaders (or the native branches) really ran there.
     for i in range(len(PRESETS)):
         assert farm_image[index == i][:, :3].mean() > 0.05
+
+
+ANIMATION_CHILD = '''
+import sys
+blend, out_dir = sys.argv[1], sys.argv[2]
+import bpy
+if hasattr(bpy.utils, "expose_bundled_modules"):
+    bpy.utils.expose_bundled_modules()
+bpy.ops.wm.open_mainfile(filepath=blend)
+scene = bpy.context.scene
+for frame in (1, 2):
+    scene.frame_set(frame)
+    scene.render.filepath = f"{out_dir}/frame{frame}.exr"
+    bpy.ops.render.render(write_still=True)
+foreign = sorted(m for m in sys.modules if m == "addon" or m.startswith("addon.")
+                 or "microfacet" in m.lower())
+report({"foreign_modules": foreign})
+'''
+
+
+def test_animation_renders_on_a_farm_without_the_addon(tmp_path):
+    """A render farm: the frames of an animation whose sun turns, rendered by a fresh process
+    without the add-on. The add-on hands each frame's lamps to the shaders before it renders;
+    the farm has only the table of the frame rendered last before saving (frame 2). So frame 2
+    must be the same image, and frame 1 the same image within its noise (the shaders are exact
+    with any table: it only guides where rays go). Would catch a frame that needs the add-on to
+    render, or a table that biases a frame it was not made for."""
+    import mathutils
+
+    from addon.lab import images
+
+    specs = [grid.SphereSpec(presets.find(p).model_id, presets.find(p).params, p) for p in PRESETS]
+    layout, _, _ = harness.render_specs(specs, grid.GRADIENT, 16, seed=5, cols=3, cell_px=32)
+    scene = bpy.context.scene
+    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
+    sun.data.energy, sun.data.angle = 3.0, 0.5  # soft: a stale table leaves no rare, heavy hits
+    scene.collection.objects.link(sun)
+    for frame, toward in ((1, (0.3, -0.4, 0.87)), (2, (-0.5, 0.2, 0.84))):
+        sun.rotation_euler = mathutils.Vector(toward).to_track_quat("Z", "Y").to_euler()
+        sun.keyframe_insert("rotation_euler", frame=frame)
+    ours = {}
+    for frame in (1, 2):
+        scene.frame_set(frame)
+        ours[frame] = harness.render(scene)[0]
+    blend = tmp_path / "animation.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=False)
+
+    farm = tmp_path / "farm"
+    farm.mkdir()
+    out = run_bpy_script(ANIMATION_CHILD, farm, str(blend), str(farm))
+    assert out["foreign_modules"] == [], out["_log"]
+    index, _, _ = layout.pixel_geometry()
+    for frame in (1, 2):
+        theirs = images.read_image(farm / f"frame{frame}.exr")
+        d = (theirs[..., :3] - ours[frame][..., :3])[index >= 0]
+        mean, stderr = d.mean(0), d.std(0, ddof=1) / np.sqrt(len(d))
+        print(f"\n[farm] frame {frame}: max |diff| {np.abs(d).max():.2e}, mean {mean} +- {stderr}")
+        assert (np.abs(mean) <= 4 * stderr + 1e-6).all(), (frame, mean, stderr)
+        if frame == 2:  # the saved table is this frame's: the same samples
+            assert np.abs(d).max() < 1e-4
+        else:  # another table: other samples, so the noise differs (the test sees it does)
+            assert np.abs(d).max() > 1e-3
+        assert theirs[index >= 0][:, :3].mean() > 0.05
