@@ -14,12 +14,22 @@ from pathlib import Path
 
 RESULT_PREFIX = "RESULT "
 
-# Paste into a child script: report(obj) prints the line run_bpy_script() looks for.
+# Pasted into every child script: report(obj) prints the line run_bpy_script() looks for;
+# open_blend(path) opens a .blend as a farm worker would (bpy's own OpenImageIO and oslquery,
+# never the add-on) and returns its scene.
 REPORT_FN = textwrap.dedent('''
     def report(obj):
         import json, sys
         sys.stdout.write("\\nRESULT " + json.dumps(obj) + "\\n")
         sys.stdout.flush()
+
+
+    def open_blend(path):
+        import bpy
+        if hasattr(bpy.utils, "expose_bundled_modules"):
+            bpy.utils.expose_bundled_modules()
+        bpy.ops.wm.open_mainfile(filepath=path)
+        return bpy.context.scene
 ''')
 
 

@@ -391,10 +391,7 @@ FARM = '''
 import sys
 blend, exr = sys.argv[1], sys.argv[2]
 import bpy
-if hasattr(bpy.utils, "expose_bundled_modules"):
-    bpy.utils.expose_bundled_modules()
-bpy.ops.wm.open_mainfile(filepath=blend)
-scene = bpy.context.scene
+scene = open_blend(blend)
 menus = sorted({(s.name, s.default_value) for m in bpy.data.materials if m.node_tree
                 for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"
                 for s in n.inputs if s.type == "MENU"})

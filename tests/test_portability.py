@@ -28,10 +28,7 @@ CHILD = '''
 import sys
 blend, exr, osl = sys.argv[1], sys.argv[2], sys.argv[3] == "osl"
 import bpy
-if hasattr(bpy.utils, "expose_bundled_modules"):
-    bpy.utils.expose_bundled_modules()  # bpy's own OpenImageIO, not the add-on
-bpy.ops.wm.open_mainfile(filepath=blend)
-scene = bpy.context.scene
+scene = open_blend(blend)
 scene.cycles.shading_system = osl
 scripts = [(g.name, n.mode, len(n.bytecode), n.script.name if n.script else None)
            for g in bpy.data.node_groups if g.bl_idname == "ShaderNodeTree"
@@ -86,10 +83,7 @@ ANIMATION_CHILD = '''
 import sys
 blend, out_dir = sys.argv[1], sys.argv[2]
 import bpy
-if hasattr(bpy.utils, "expose_bundled_modules"):
-    bpy.utils.expose_bundled_modules()
-bpy.ops.wm.open_mainfile(filepath=blend)
-scene = bpy.context.scene
+scene = open_blend(blend)
 for frame in (1, 2):
     scene.frame_set(frame)
     scene.render.filepath = f"{out_dir}/frame{frame}.exr"
