@@ -406,14 +406,16 @@ report({"menus": [list(m) for m in menus], "foreign_modules": foreign})
 @pytest.mark.render
 @pytest.mark.skipif(not compat.MENU_SOCKETS, reason="no menu sockets in shader node groups before 5.0")
 def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
-    env = {"OSL_OPTIONS": "statistics:level=1,debug=1"}
     runs = {}
     for mode in ("menu", "int", "varying"):
         work = tmp_path / mode
         work.mkdir()
         blend = str(work / "menus.blend") if mode == "menu" else "-"
+        # The layer listing (debug=1, about 9 s and 47 MB a run) for the menus and the varying
+        # chain; the integers' statistics equal to the menus' say their folding is the same.
+        debug = ",debug=1" if mode != "int" else ""
         out = run_bpy_script(RENDER, work, str(ROOT), mode, str(work / "grid.exr"), blend,
-                             env=env, timeout=300)
+                             env={"OSL_OPTIONS": "statistics:level=1" + debug}, timeout=300)
         runs[mode] = (out, images.read_image(work / "grid.exr"))
     menu, menu_image = runs["menu"]
     integer, int_image = runs["int"]
@@ -456,13 +458,14 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
     assert folding_stats(menu["stats"]) == folding_stats(integer["stats"])
     # ... while the same codes through a varying chain are seen as connections.
     assert varying["stats"] != integer["stats"]
-    # Per shader layer: no enum survives optimization as a parameter read, menu or integer;
-    # through the varying chain every one is connected and read at run time.
+    # Per shader layer: no enum survives optimization as a parameter read with menus (and the
+    # integers' optimizer statistics are the menus', above); through the varying chain every
+    # one is connected and read at run time.
     print(f"[menus] enum parameters left after optimization: menu {menu['folding']}, "
           f"varying {varying['folding']}")
     zero = {"useparam": 0, "connected": 0}
     assert set(menu["folding"]) == set(ENUMS)
-    assert menu["folding"] == integer["folding"] == {pid: zero for pid in ENUMS}
+    assert menu["folding"] == {pid: zero for pid in ENUMS}
     assert all(f["connected"] > 0 and f["useparam"] > 0 for f in varying["folding"].values()), \
         varying["folding"]
 

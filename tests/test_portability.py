@@ -94,6 +94,7 @@ report({"foreign_modules": foreign})
 '''
 
 
+@pytest.mark.release_only  # the saved file's portability is the tests above, on every version
 def test_animation_renders_on_a_farm_without_the_addon(tmp_path):
     """A render farm: the frames of an animation whose sun turns, rendered by a fresh process
     without the add-on. The add-on hands each frame's lamps to the shaders before it renders;
