@@ -51,9 +51,14 @@ def _adopt(group) -> int:
     model = nodes.model_of(group)
     script = group.nodes.get(nodes.SCRIPT_NODE_NAME)
     text = getattr(script, "script", None)
-    if group.name == nodes.group_name(model):  # free the name for the add-on's own group
-        group.name = nodes.group_name(model) + " (appended)"
-    own = nodes.ensure_group(model.id)
+    name = group.name
+    if name == nodes.group_name(model):  # free the name for the add-on's own group
+        group.name = name + " (appended)"
+    try:
+        own = nodes.ensure_group(model.id)
+    except Exception:  # the add-on's group does not compile here: leave the appended one as it was
+        group.name = name
+        raise
     moved = 0
     for tree, node in list(_users(group)):
         values = nodes.read_inputs(node, model)
