@@ -111,7 +111,9 @@ def _dir_key(directory: Path):
         return ()
 
 
-def _icon(preset_id: str) -> int:
+def preview(preset_id: str):
+    """The preset's preview (an ImagePreview of its shipped PNG, the pixels its asset carries),
+    loaded once; None when there is no picture or previews are unavailable."""
     global _previews
     for folder in asset_library.preview_dirs():
         path = folder / f"{preset_id}.png"
@@ -123,10 +125,15 @@ def _icon(preset_id: str) -> int:
                 key = str(path)
                 if key not in _previews:
                     _previews.load(key, key, "IMAGE")
-                return _previews[key].icon_id
+                return _previews[key]
             except Exception:  # previews unavailable (e.g. some headless builds): text only
-                return 0
-    return 0
+                return None
+    return None
+
+
+def _icon(preset_id: str) -> int:
+    found = preview(preset_id)
+    return found.icon_id if found is not None else 0
 
 
 def refresh(force: bool = False):

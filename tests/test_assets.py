@@ -69,6 +69,27 @@ def test_library_holds_one_asset_per_preset():
             assert values[key] == pytest.approx(value, rel=1e-6, abs=1e-6), (preset_id, key)
 
 
+def test_the_panel_shows_the_assets_previews():
+    """The presets panel's gallery loads each preset's shipped PNG (whose pixels the asset
+    carries, checked above). Headless Blender gives previews no icon id, so their pixels are
+    compared instead."""
+    harness.new_scene()
+    preset_ui.register()
+    try:
+        preset_ui.refresh(force=True)
+        for preset_id in PRESETS:
+            preview = preset_ui.preview(preset_id)
+            assert preview is not None, preset_id
+            w, h = preview.image_size
+            assert (w, h) == (asset_library.PREVIEW_PX,) * 2, preset_id
+            pixels = np.empty(w * h * 4, dtype=np.float32)
+            preview.image_pixels_float.foreach_get(pixels)
+            shipped = images.read_image(asset_library.preview_path(preset_id))
+            assert np.abs(pixels.reshape(h, w, 4)[::-1, :, :3] - shipped).max() < 1.5 / 255
+    finally:
+        preset_ui.unregister()
+
+
 def _drop(preset_id):
     """What dropping the asset does: append the material (the library's import method,
     Append (Reuse Data)), then the depsgraph update that follows."""
