@@ -12,7 +12,7 @@ import os
 
 import bpy
 
-from . import asset_library
+from . import asset_library, compat
 
 
 def _same_folder(a: str, b) -> bool:
@@ -47,6 +47,7 @@ class PREFERENCES_OT_microfacet_lab_add_asset_library(bpy.types.Operator):
         if library is None:
             library = context.preferences.filepaths.asset_libraries.new(
                 name=asset_library.LIBRARY_NAME, directory=str(asset_library.ASSETS_DIR))
+        compat.append_on_import(library)  # a dropped preset must be local data (addon/adopt.py)
         self.report({"INFO"}, f"Asset library {library.name!r} -> {asset_library.ASSETS_DIR}; it "
                               "is kept when Blender saves its preferences")
         return {"FINISHED"}

@@ -92,3 +92,17 @@ def modifier_input_values(modifier) -> list:
                 if getattr(item, "in_out", None) == "INPUT" and hasattr(inputs, item.identifier)
                 and hasattr(getattr(inputs, item.identifier), "value")]
     return [modifier[key] for key in modifier.keys()]
+
+
+def append_on_import(library) -> str:
+    """Make an asset library append what is dragged from it (editable local data the add-on can
+    hand lamps to), reusing earlier appends where Blender offers it: Append (Reuse Data), the
+    4.2-5.0 default; 5.3 makes new libraries Pack (linked, read-only data packed into the file)
+    by default and takes only Link, Append or Pack. Returns the method set."""
+    for method in ("APPEND_REUSE", "APPEND"):
+        try:
+            library.import_method = method
+            return method
+        except TypeError:
+            continue
+    return library.import_method

@@ -212,7 +212,8 @@ out["applied"] = applied
 
 # The asset library, added to the Asset Browser by the installed operator.
 out["library_op"] = sorted(bpy.ops.preferences.microfacet_lab_add_asset_library())
-libraries = [(lib.name, lib.path) for lib in bpy.context.preferences.filepaths.asset_libraries]
+libraries = [(lib.name, lib.path, lib.import_method)
+             for lib in bpy.context.preferences.filepaths.asset_libraries]
 out["libraries"] = libraries
 blend = os.path.join(libraries[-1][1], "Microfacet Lab presets.blend")
 with bpy.data.libraries.load(blend, link=True, assets_only=True) as (src, dst):
@@ -250,8 +251,10 @@ def test_install_in_fresh_blender(package, tmp_path):
         assert applied["result"] == ["FINISHED"], f"{preset_id}: {applied}\n{log}"
         assert applied["key"] == preset_id and applied["material"], f"{preset_id}: {applied}"
     assert out["library_op"] == ["FINISHED"], log
-    name, path = out["libraries"][-1]
+    name, path, method = out["libraries"][-1]
     assert name == "Microfacet Lab" and Path(path).resolve() == (installed / "assets").resolve(), log
+    # Dropped presets are appended (5.3 makes a new library Pack: linked, read-only data).
+    assert method in ("APPEND_REUSE", "APPEND"), log
     assert out["assets"] == shipped, log
 
 
