@@ -63,12 +63,12 @@ def _adopt(group) -> int:
     for tree, node in list(_users(group)):
         values = nodes.read_inputs(node, model)
         links = [(sock.name, link.from_socket) for sock in node.inputs for link in sock.links]
-        outputs = [(link.to_socket) for sock in node.outputs for link in sock.links]
+        outputs = [link.to_socket for sock in node.outputs for link in sock.links]
         node.node_tree = own
         nodes.set_inputs(node, model, values)
-        for name, source in links:  # sockets are matched by name: keep what fed them
-            if not node.inputs[name].is_linked:
-                tree.links.new(source, node.inputs[name])
+        for label, source in links:  # sockets are matched by name: keep what fed them
+            if not node.inputs[label].is_linked:
+                tree.links.new(source, node.inputs[label])
         for target in outputs:
             if not target.is_linked:
                 tree.links.new(node.outputs["BSDF"], target)

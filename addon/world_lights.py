@@ -128,7 +128,8 @@ def _band_luminance(pixels, srgb: bool):
 
 def _is_srgb(image, as_stored: bool) -> bool:
     """Whether values are sRGB-encoded: in the file whenever the image's colour space is sRGB
-    (`as_stored`); in Blender's copy only for 8-bit images (it makes float ones linear)."""
+    (`as_stored`); in Blender's copy only for 8-bit images (it makes float ones linear). Other
+    colour spaces are read as linear: the spots only guide where rays go."""
     srgb = image.colorspace_settings.name.lower().startswith("srgb")
     return srgb and (as_stored or not image.is_float)
 
