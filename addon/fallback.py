@@ -24,11 +24,12 @@ from __future__ import annotations
 import json
 from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
 from . import compat
 from .catalog import MODELS, Model
 
-# Lee's and Cook-Torrance's correction lobes: polynomial coefficients fitted to the numpy
+# The correction lobes and scales (FITTED): polynomial coefficients fitted to the numpy
 # reference by addon/lab/fallback_fit.py (`make fallback-fit`), read here as data.
 FIT_PATH = Path(__file__).resolve().with_name("fallback_fit.json")
 
@@ -40,20 +41,29 @@ NATIVE = {
     "cook_torrance": "Diffuse plus a Beckmann metal (Smith instead of V-cavity shadowing, "
                      "with a Glossy lobe fitted to the difference)",
     "walter_reflection": "Metallic BSDF (Physical Conductor) or Glossy: exact for GGX or "
-                         "Beckmann with Height-correlated masking (metals from Blender 5.0)",
-    "walter_glass": "Glass BSDF: exact for Height-correlated masking",
+                         "Beckmann with Height-correlated masking (metals from Blender 5.0), "
+                         "scaled by a fitted factor for Separable masking",
+    "walter_glass": "Glass BSDF: exact for Height-correlated masking, its colour scaled by a "
+                    "fitted factor for Separable masking",
     "lee_vgroove": "Metallic or Glossy with Multiscatter GGX (Beckmann: single scattering), "
                    "plus a Glossy lobe fitted to the grooves' extra bounces",
-    "heitz2016": "Metallic, Glass or Glossy with Multiscatter GGX (Beckmann: single scattering)",
+    "heitz2016": "Metallic, Glass or Glossy with Multiscatter GGX (Beckmann: single scattering), "
+                 "a metal plus a Glossy lobe fitted to the walk's extra bounces, the glass's "
+                 "colour scaled by a fitted factor",
 }
 
 
 def approximation(model_id: str, preset_id: str | None = None) -> str:
     """What a model renders as where OSL does not run and how near it comes, for the artist:
-    the numpy errors of fit() for the preset (Lee, Cook-Torrance), or over Lee's fit."""
+    the numpy errors of fit() for a fitted preset, or over the model's fitted variants."""
     text = f"without OSL renders as {NATIVE[model_id]}"
     errors = fit()["presets"].get(preset_id) if preset_id else None
-    variants = [v for k, v in fit()["variants"].items() if k.startswith(model_id + "/")]
+    # Without a preset: the worst over the fitted variants, where the model's default is one.
+    fitted = FITTED.get(model_id)
+    default_fitted = fitted is not None and MODELS[model_id].param(fitted.enum).default in (
+        fitted.lobe + fitted.scale)
+    variants = [v for k, v in fit()["variants"].items()
+                if k.startswith(model_id + "/") and default_fitted and not preset_id]
     if errors is None and variants:
         errors = {name: {"mean": max(v[name]["mean"] for v in variants),
                          "worst": max(v[name]["worst"] for v in variants)}
@@ -237,7 +247,9 @@ def reflection(b: Branch, distribution: str, anisotropy=0.0):
 
 
 def glass(b: Branch, distribution: str):
-    return b.bsdf("ShaderNodeBsdfGlass", distribution, Color=b.src("base_color"),
+    """A Glass BSDF coloured by the tint times the fitted scale (fitted_scale)."""
+    color = b.vector_math("MULTIPLY", b.src("base_color"), fitted_scale(b, distribution))
+    return b.bsdf("ShaderNodeBsdfGlass", distribution, Color=color,
                   Roughness=b.src("roughness"), IOR=b.src("ior"))
 
 
@@ -258,8 +270,12 @@ def cook_torrance(b: Branch):
 
 
 def walter_reflection(b: Branch):
+    # A closure without a Color input is scaled by a Mix Shader, whose Factor (in [0, 1]) is
+    # the channels' mean: Separable masking only darkens, and its ratio to Height-correlated
+    # is geometric, the same for every channel but for the Fresnel's weighting.
     anisotropy = b.src("anisotropy") if compat.NATIVE_ANISOTROPY else 0.0
-    return b.by_distribution(lambda d: reflection(b, d, anisotropy))
+    return b.by_distribution(lambda d: b.mix_shader(b.mean(fitted_scale(b, d)), None,
+                                                    reflection(b, d, anisotropy)))
 
 
 def walter_glass(b: Branch):
@@ -279,37 +295,72 @@ def fit() -> dict:
     return json.loads(FIT_PATH.read_text(encoding="utf-8"))
 
 
-# Per model, the enum whose every item has a polynomial of its own (addon/lab/fallback_fit.py):
-# Lee's groove shape; Cook-Torrance's Fresnel (against one polynomial for both, in numpy:
-# gold_cook_torrance's worst albedo error 2.65% -> 1.57%, blue_rubber's 3.57% -> 3.21%; the
-# dielectrics' worst over the training set 12.9% -> 14.3% while their mean falls a little).
-FITTED_BY = {"lee_vgroove": "groove", "cook_torrance": "fresnel_type"}
+class Fitted(NamedTuple):
+    """Which variants of a model have a fitted polynomial C(r, x, F0) (addon/lab/fallback_fit.py)
+    and how it enters the branch: the items of `enum` in `lobe` add a single-scattering Glossy
+    lobe of colour max(C, 0) (it can only add light); those in `scale` multiply the native
+    closure by max(C, 0) (darker or brighter); any other item keeps the plain branch."""
+    enum: str
+    lobe: tuple = ()
+    scale: tuple = ()
 
 
-def correction(b: Branch, distribution: str):
-    """The model's correction lobe (addon/lab/fallback_fit.py): a single-scattering Glossy BSDF
-    with the branch's distribution and roughness, of colour max(C(r, x, F0), 0), C the
-    polynomial fitted for the model, distribution and item of FITTED_BY's enum; Lee's times the
-    tint. `distribution` as by_distribution passes it."""
+# Lee: one polynomial per groove shape. Cook-Torrance: per Fresnel kind (against one polynomial
+# for both, in numpy: gold_cook_torrance's worst albedo error 2.65% -> 1.57%, blue_rubber's
+# 3.57% -> 3.21%; the dielectrics' worst over the training set 12.9% -> 14.3% while their mean
+# falls a little). Heitz 2016: a metal's lobe as Lee's; the glass scaled, since the native Glass
+# keeps the light the walk sends forward through the interface, which Cycles cannot return
+# (docs/models.md, sec. 5); Fresnel None is exact (both keep all the light). Walter's
+# Separable masking: the Height-correlated closure scaled (Separable shadows more).
+FITTED = {
+    "lee_vgroove": Fitted("groove", lobe=("symmetric", "asymmetric")),
+    "cook_torrance": Fitted("fresnel_type", lobe=("conductor", "dielectric")),
+    "heitz2016": Fitted("fresnel_type", lobe=("conductor",), scale=("dielectric",)),
+    "walter_reflection": Fitted("masking", scale=("separable",)),
+    "walter_glass": Fitted("masking", scale=("separable",)),
+}
+
+
+def _fitted_color(b: Branch, distribution: str, items: tuple, default):
+    """max(C, 0) of the polynomial fitted for the model, distribution and the enum's item
+    (FITTED), switched by the model's enum; `default` where the enum is set to another item."""
     dist = "beckmann" if distribution == "BECKMANN" else "ggx"
     f0, x = branch_f0(b), b.facing()
-    pid = FITTED_BY[b.model.id]
+    pid = FITTED[b.model.id].enum
 
     def colour(item):
         coefficients = fit()["variants"][f"{b.model.id}/{dist}/{item}"]["coefficients"]
         return polynomial_color(b, coefficients, x, f0)
 
-    first, *others = b.model.param(pid).items
-    value = colour(first)
-    for item in others:
+    every = set(items) == set(b.model.param(pid).items)
+    value = colour(items[0]) if every else default
+    for item in items[1:] if every else items:
         value = b.mix_vector(b.is_item(pid, item), value, colour(item))
-    if b.model.id == "lee_vgroove":
+    return value
+
+
+def correction(b: Branch, distribution: str):
+    """The model's correction lobe (addon/lab/fallback_fit.py): a single-scattering Glossy BSDF
+    with the branch's distribution and roughness, of colour max(C(r, x, F0), 0) for FITTED's
+    lobe items (black for the others); Lee's and Heitz's times the tint. `distribution` as
+    by_distribution passes it."""
+    value = _fitted_color(b, distribution, FITTED[b.model.id].lobe, (0.0, 0.0, 0.0))
+    if b.model.id in ("lee_vgroove", "heitz2016"):
         value = b.vector_math("MULTIPLY", value, b.src("base_color"))
-    return b.bsdf("ShaderNodeBsdfGlossy", dist.upper(), Color=value, Roughness=b.src("roughness"))
+    dist = "BECKMANN" if distribution == "BECKMANN" else "GGX"
+    return b.bsdf("ShaderNodeBsdfGlossy", dist, Color=value, Roughness=b.src("roughness"))
+
+
+def fitted_scale(b: Branch, distribution: str):
+    """The native closure's fitted scale per channel (FITTED's scale items; 1 for the others)."""
+    return _fitted_color(b, distribution, FITTED[b.model.id].scale, (1.0, 1.0, 1.0))
 
 
 def branch_f0(b: Branch):
-    """Reflectance at normal incidence of the model's Fresnel, per channel (1 for None)."""
+    """Reflectance at normal incidence of the model's Fresnel, per channel (1 for None; a
+    model without a Fresnel menu is glass, of its IOR)."""
+    if not any(p.id == "fresnel_type" for p in b.model.params):
+        return f0_conductor(b, b.gray(b.src("ior")), (0.0, 0.0, 0.0))
     n, k = metal_indices(b)
     f0 = f0_conductor(b, n, k)
     if "none" not in b.model.param("fresnel_type").items:
@@ -342,7 +393,8 @@ def polynomial_color(b: Branch, coefficients, x, f0):
 
 def heitz2016(b: Branch):
     def make(d):
-        return b.mix_shader(b.is_item("fresnel_type", "dielectric"), reflection(b, d), glass(b, d))
+        metal_ = b.add_shader(reflection(b, d), correction(b, d))
+        return b.mix_shader(b.is_item("fresnel_type", "dielectric"), metal_, glass(b, d))
     return b.by_distribution(make, ggx="MULTI_GGX")
 
 

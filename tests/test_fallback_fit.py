@@ -1,15 +1,19 @@
-"""The fitted correction of Lee's native branch (addon/fallback_fit.json, made by
-`make fallback-fit` from addon/lab/fallback_fit.py) is current and does what it says.
+"""The fitted corrections of the native branches (addon/fallback_fit.json, made by
+`make fallback-fit` from addon/lab/fallback_fit.py; fallback.FITTED says which) are current and
+do what they say.
 
-- It matches the catalog (Lee's distributions and groove shapes, one polynomial each) and the
-  presets it was trained on: catches a fit that drifted from the catalog or the presets.
-- The errors it states for each Lee preset (albedo, and the lobe's mean direction) are what the numpy reference and the numpy model of
-  Cycles' closures give today with its coefficients (to 1e-6): catches a change to Lee's
-  reference, to the native branch's model or to the presets after which the fit was not run
-  again.
+- They match the catalog (each fitted model's distributions and enum items, one polynomial
+  each) and the presets they were trained on: catches a fit that drifted from the catalog or
+  the presets.
+- The errors stated for each fitted preset (albedo, and the lobe's mean direction) are what the
+  numpy reference and the numpy model of Cycles' closures give today with its coefficients (to
+  1e-6; Heitz 2016's Monte Carlo moments are seeded by their inputs): catches a change to a
+  model's reference, to the native branch's model or to the presets after which the fit was not
+  run again.
 - At a roughness it was not trained on (0.65), for every training material, it lowers the
   mean and the worst relative albedo error of every variant.
-No bpy: tests/test_render_fallback_fit.py renders the lobe built from these coefficients.
+No bpy: tests/test_render_fallback_fit.py renders the lobes and scales built from these
+coefficients.
 """
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
-"""The correction lobes of Lee's and Cook-Torrance's native branches, fitted to the numpy
-reference (`make fallback-fit`).
+"""The fitted corrections of the native branches (addon/fallback.py, FITTED), fitted to the
+numpy reference (`make fallback-fit`).
 
 Without OSL, Lee's V-grooves render as Cycles' Metallic BSDF (Multiscatter GGX; Beckmann has no
 multiscatter variant in Cycles, so single scattering) or, for Fresnel None, a Glossy BSDF
@@ -23,8 +23,17 @@ Smith masking) falls short of the model's V-cavity masking at grazing incidence 
 -12% at mu = 0.01); its specular share gets a correction lobe fitted the same way, one
 polynomial for metals and one for dielectrics (the model has no Fresnel None; against a single
 one for both: mean relative error of the metals 1.11% -> 1.07%, of the dielectrics 2.53% ->
-2.50%, their worst 7.3% and 12.9% -> 14.3%; gold_cook_torrance's worst 2.65% -> 1.57%). Which
-enum splits a model's fit: fallback.FITTED_BY.
+2.50%, their worst 7.3% and 12.9% -> 14.3%; gold_cook_torrance's worst 2.65% -> 1.57%).
+
+Heitz 2016's metals get a lobe as Lee's (the walk against Cycles' Multiscatter GGX, whose average
+Fresnel is an F82 fit). Its glass, and Walter's Separable masking, get a scale instead: the
+native closure times max(C, 0), fitted so that E_native max(C, 0) = E. Heitz's glass needs it
+because the native Glass BSDF (Multiscatter GGX) keeps all the light while the walk, as the
+shader renders it, loses what it sends forward through the interface (docs/models.md, sec. 5:
+up to a tenth at grazing incidence); Separable masking shadows more than Cycles'
+Height-correlated closure. Heitz's moments are Monte Carlo (HEITZ_WALKS walks per incidence,
+seeded by the inputs, so a fit and its test read the same numbers). Which enum splits a
+model's fit, and which items are a lobe or a scale: fallback.FITTED.
 
 The native albedo is Cycles' closure in numpy: single scattering from the Walter reference
 (Cycles' GGX and Beckmann with Height-correlated masking are the same BSDF, exact conductor
@@ -38,6 +47,7 @@ Cycles). Measured against renders by `make report` (section "fallback").
 from __future__ import annotations
 
 import json
+import zlib
 from typing import NamedTuple
 
 import numpy as np
@@ -46,8 +56,15 @@ from .. import fallback, presets
 from ..catalog import MODELS
 from .reference import make_bsdf, quadrature
 from .reference.fresnel import fresnel_conductor
+from .reference.heitz2016.moments import directional_moments_mc
 
-LEE, COOK_TORRANCE = MODELS["lee_vgroove"], MODELS["cook_torrance"]
+LEE, COOK_TORRANCE, HEITZ = MODELS["lee_vgroove"], MODELS["cook_torrance"], MODELS["heitz2016"]
+WALTER_GLASS = MODELS["walter_glass"]
+FIT_MODELS = [MODELS[m] for m in fallback.FITTED]
+# The Heitz 2016 walk's moments are Monte Carlo (reference/heitz2016/moments.py): this many walks
+# per incidence, from a seed fixed by the sample's inputs (its standard error about 2e-4 for a
+# metal, up to 2e-3 for glass at grazing incidence: far below the errors fitted).
+HEITZ_WALKS = 40_000
 ORDERS = {"roughness": 3, "facing": 3, "f0": 2}  # highest power of r, x, F0
 TERMS = [(i, j, k) for i in range(ORDERS["roughness"] + 1) for j in range(ORDERS["facing"] + 1)
          for k in range(ORDERS["f0"] + 1)]
@@ -60,8 +77,8 @@ WHITE = {"fresnel_type": "none"}
 
 class Variant(NamedTuple):
     """One fitted polynomial: the model, its distribution and the item of the model's enum
-    that has polynomials of its own (fallback.FITTED_BY: Lee's groove shape, Cook-Torrance's
-    Fresnel)."""
+    that has polynomials of its own (fallback.FITTED: Lee's groove shape, Cook-Torrance's and
+    Heitz's Fresnel, Walter's masking)."""
     model: str
     distribution: str
     item: str
@@ -70,6 +87,17 @@ class Variant(NamedTuple):
     def key(self) -> str:  # fallback.fit()["variants"] key, read by fallback.py
         return "/".join((self.model, self.distribution, self.item))
 
+    @property
+    def lobe(self) -> bool:
+        """An added lobe (True) or a scale of the native closure (False): fallback.FITTED."""
+        return self.item in fallback.FITTED[self.model].lobe
+
+    @property
+    def glass(self) -> bool:
+        """The native branch is a Glass BSDF (reflection and transmission)."""
+        return self.model == WALTER_GLASS.id or (self.model == HEITZ.id
+                                                 and self.item == "dielectric")
+
 
 def distributions(model) -> tuple:
     """The model's distributions (Cook-Torrance has Beckmann's alone, no switch)."""
@@ -77,14 +105,18 @@ def distributions(model) -> tuple:
     return model.param("distribution").items if "distribution" in ids else ("beckmann",)
 
 
-VARIANTS = [Variant(m.id, d, item) for m in (LEE, COOK_TORRANCE) for d in distributions(m)
-            for item in m.param(fallback.FITTED_BY[m.id]).items]
+VARIANTS = [Variant(m.id, d, item) for m in FIT_MODELS for d in distributions(m)
+            for item in fallback.FITTED[m.id].lobe + fallback.FITTED[m.id].scale]
 
 
-def variant_of(model_id: str, values: dict) -> Variant:
-    """The variant whose polynomial the branch uses for resolved catalog `values`."""
-    return Variant(model_id, values.get("distribution", "beckmann"),
-                   values[fallback.FITTED_BY[model_id]])
+def variant_of(model_id: str, values: dict) -> Variant | None:
+    """The variant whose polynomial the branch uses for resolved catalog `values` (None: the
+    plain branch, e.g. Walter's Height-correlated masking, which is exact)."""
+    if model_id not in fallback.FITTED:
+        return None
+    variant = Variant(model_id, values.get("distribution", "beckmann"),
+                      values[fallback.FITTED[model_id].enum])
+    return variant if variant in VARIANTS else None
 
 
 # -- Cycles' native closures in numpy ----------------------------------------------------------
@@ -122,16 +154,31 @@ def fss_conductor(n, k):
     return np.clip(f0 + (1.0 - f0) / 21.0 - b / 126.0, 0.0, 1.0)
 
 
-def native_moments(distribution: str, r: float, mu, material: dict):
-    """Lee's native branch without its correction (addon/fallback.py): Metallic (n, k) or
-    Glossy (F = 1), Multiscatter GGX or single-scattering Beckmann. Cycles' energy
-    compensation scales the whole lobe by a factor of mu alone."""
+def glass_moments(distribution: str, r: float, mu, ior: float):
+    """Single-scattering rough glass with Height-correlated masking (Walter 2007; Cycles' Glass
+    BSDF, GGX or Beckmann): moments over the whole sphere (reference/quadrature.py)."""
+    bsdf = make_bsdf(WALTER_GLASS.id, {"roughness": r, "distribution": distribution,
+                                       "masking": "height_correlated", "ior": ior})
+    return np.stack(quadrature.directional_moments(bsdf, np.asarray(mu, dtype=float)))
+
+
+def native_moments(variant: Variant, r: float, mu, material: dict):
+    """The native branch without its correction (addon/fallback.py): for Lee and Heitz,
+    Metallic (n, k) or Glossy (F = 1) with Multiscatter GGX or single-scattering Beckmann,
+    or Heitz's glass, a Glass BSDF; for Walter and Cook-Torrance single scattering."""
+    distribution = variant.distribution
+    multiscatter = distribution == "ggx" and variant.model in (LEE.id, HEITZ.id)
+    if variant.glass:
+        moments = glass_moments(distribution, r, mu, material["ior"])
+        # Cycles' Multiscatter GGX glass divides by the single-scattering albedo (reflection
+        # plus transmission, read from its table): it keeps all the light.
+        return moments / moments[0][None, :, :1] if multiscatter else moments
     if material["fresnel_type"] == "none":
         moments, f_ss = single_moments(distribution, r, mu), 1.0
     else:
         n, k = conductor_of(material)
         moments, f_ss = single_moments(distribution, r, mu, "conductor", n, k), fss_conductor(n, k)
-    if distribution != "ggx":
+    if not multiscatter:
         return moments
     e_1 = single_albedo("ggx", r, mu)[:, :1]
     e_avg = average_albedo("ggx", r)
@@ -141,27 +188,39 @@ def native_moments(distribution: str, r: float, mu, material: dict):
 
 def conductor_of(material: dict):
     """(n, k) of the Metallic BSDF the branch uses: a dielectric is a conductor with k = 0."""
-    if material["fresnel_type"] == "dielectric":
+    if material.get("fresnel_type", "dielectric") == "dielectric":
         return (material["ior"],) * 3, (0.0, 0.0, 0.0)
     return tuple(material["n"]), tuple(material["k"])
 
 
 def f0_of(material: dict) -> np.ndarray:
-    if material["fresnel_type"] == "none":
+    if material.get("fresnel_type", "dielectric") == "none":
         return np.ones(3)
     n, k = conductor_of(material)
     return fresnel_conductor(1.0, np.asarray(n), np.asarray(k))
 
 
 def exact_moments(variant: Variant, r: float, mu, material: dict):
-    """The model's moments: Lee by its closed-form quadrature, Cook-Torrance's specular share
-    alone (specular 1) by reference/quadrature.py."""
+    """The model's moments: Lee by its closed-form quadrature, Heitz 2016 by Monte Carlo
+    (HEITZ_WALKS walks per incidence, seeded by the inputs), Cook-Torrance's specular share
+    alone (specular 1) and Walter by reference/quadrature.py."""
     values = dict(material, roughness=r)
+    mu = np.asarray(mu, dtype=float)
     if variant.model == LEE.id:
         values.update(distribution=variant.distribution, groove=variant.item)
-        return np.stack(make_bsdf(LEE.id, values).directional_moments(np.asarray(mu)))
-    bsdf = make_bsdf(COOK_TORRANCE.id, dict(values, specular=1.0))
-    return np.stack(quadrature.directional_moments(bsdf, np.asarray(mu, dtype=float)))
+        return np.stack(make_bsdf(LEE.id, values).directional_moments(mu))
+    if variant.model == HEITZ.id:
+        bsdf = make_bsdf(HEITZ.id, dict(values, distribution=variant.distribution))
+        seed = zlib.crc32(json.dumps([variant.key, r, material], sort_keys=True).encode())
+        m = directional_moments_mc(bsdf.walk, mu, HEITZ_WALKS, np.random.default_rng(seed),
+                                   bsdf.max_order)
+        return np.stack((m.E, m.Vn, m.Vt))
+    if variant.model == COOK_TORRANCE.id:
+        values["specular"] = 1.0
+    else:
+        values.update(distribution=variant.distribution, masking=variant.item)
+    bsdf = make_bsdf(variant.model, values)
+    return np.stack(quadrature.directional_moments(bsdf, mu))
 
 
 # -- the polynomial ------------------------------------------------------------------------------
@@ -171,32 +230,36 @@ def basis(r, x, f0, terms=TERMS) -> np.ndarray:
 
 
 def correction(coefficients, r, x, f0, terms=TERMS):
-    """C(r, x, F0) before the clamp at 0: what fallback.correction builds in nodes."""
+    """C(r, x, F0) before the clamp at 0: what fallback.polynomial_color builds in nodes."""
     return basis(r, x, f0, terms) @ np.asarray(coefficients, dtype=float)
 
 
 def samples(variant: Variant, r, material, mu=MU, offset=0.0, scale=1.0):
-    """Arrays over (mu, channel): r, x, F0; the moments (3, ...) of the model, of the native
-    branch and of the single-scattering lobe with F = 1. The model and its branch are both
-    offset + scale * (the part fitted): Cook-Torrance's diffuse share and its specular."""
+    """Arrays over (mu, channel): r, x, F0, whether the fit adds a lobe (else it scales the
+    native closure); the moments (3, ...) of the model, of the native branch and of the
+    single-scattering lobe with F = 1 (what a lobe adds to; zero for a scale). The model and
+    its branch are both offset + scale * (the part fitted): Cook-Torrance's diffuse share and
+    its specular."""
     mu = np.asarray(mu, dtype=float)
     exact = exact_moments(variant, r, mu, material)
     shape = exact.shape[1:]
+    native = native_moments(variant, r, mu, material)
+    single = (single_moments(variant.distribution, r, mu) if variant.lobe
+              else np.zeros_like(native))
     return {"r": np.full(shape, r), "x": np.broadcast_to((1.0 - mu)[:, None], shape),
-            "f0": np.broadcast_to(f0_of(material), shape),
+            "f0": np.broadcast_to(f0_of(material), shape), "lobe": np.full(shape, variant.lobe),
             "offset": np.broadcast_to(offset, exact.shape), "scale": np.full(shape, scale),
-            "exact": offset + scale * exact,
-            "native": native_moments(variant.distribution, r, mu, material),
-            "single": single_moments(variant.distribution, r, mu)}
+            "exact": offset + scale * exact, "native": native, "single": single}
 
 
 def branch_moments(s: dict, coefficients=None):
-    """The native branch's moments, with the correction lobe if coefficients are given."""
-    lobe = s["native"]
+    """The native branch's moments, with its correction (a lobe added or a scale) if
+    coefficients are given."""
+    part = s["native"]
     if coefficients is not None:
-        lobe = lobe + s["single"] * np.maximum(correction(coefficients, s["r"], s["x"], s["f0"]),
-                                               0.0)
-    return s["offset"] + s["scale"] * lobe
+        c = np.maximum(correction(coefficients, s["r"], s["x"], s["f0"]), 0.0)
+        part = np.where(s["lobe"], part + s["single"] * c, part * c)
+    return s["offset"] + s["scale"] * part
 
 
 def albedo_error(branch, exact) -> np.ndarray:
@@ -226,6 +289,11 @@ def lobe_errors(s: dict, coefficients=None) -> np.ndarray:
 
 
 def training_materials(model: str = LEE.id) -> list[dict]:
+    """The presets' metals, four dielectrics and F = 1, as far as the model has each Fresnel
+    (a model without a Fresnel menu is glass: the dielectrics' IORs alone)."""
+    ids = {p.id for p in MODELS[model].params}
+    if "fresnel_type" not in ids:
+        return [{"ior": ior} for ior in DIELECTRIC_IORS]
     metals, seen = [], set()
     for p in sorted(presets.load_all().values(), key=lambda p: p.id):
         v = p.params
@@ -241,7 +309,7 @@ def variant_materials(variant: Variant) -> list[dict]:
     """The training materials of a variant: the model's, of the variant's Fresnel kind where
     that is what splits the fit."""
     materials = training_materials(variant.model)
-    if fallback.FITTED_BY[variant.model] != "fresnel_type":
+    if fallback.FITTED[variant.model].enum != "fresnel_type":
         return materials
     return [m for m in materials if m["fresnel_type"] == variant.item]
 
@@ -254,11 +322,11 @@ def stack(many: list[dict]) -> dict:
 
 
 def fit(s: dict) -> np.ndarray:
-    """Least squares of the relative error: (E_1 C - (E - E_native)) / E (training samples:
-    offset 0, scale 1)."""
+    """Least squares of the relative error (training samples: offset 0, scale 1): of a lobe,
+    (E_1 C - (E - E_native)) / E; of a scale, (E_native C - E) / E."""
     exact, native, single = s["exact"][0], s["native"][0], s["single"][0]
-    a = basis(s["r"], s["x"], s["f0"]) * (single / exact)[:, None]
-    b = (exact - native) / exact
+    a = basis(s["r"], s["x"], s["f0"]) * (np.where(s["lobe"], single, native) / exact)[:, None]
+    b = np.where(s["lobe"], (exact - native) / exact, 1.0)
     coefficients, *_ = np.linalg.lstsq(a, b, rcond=None)
     return coefficients
 
@@ -279,9 +347,9 @@ def preset_samples(preset) -> tuple[str, dict]:
     """The preset's variant key and samples (Cook-Torrance: its diffuse share as the offset,
     its specular as the scale)."""
     v = preset.resolved()
-    material = {k: v[k] for k in ("fresnel_type", "ior", "n", "k")}
+    material = {k: v[k] for k in ("fresnel_type", "ior", "n", "k") if k in v}
     variant = variant_of(preset.model_id, v)
-    if preset.model_id == LEE.id:
+    if preset.model_id != COOK_TORRANCE.id:
         return variant.key, samples(variant, v["roughness"], material)
     diffuse = np.broadcast_to((1.0 - v["specular"]) * np.asarray(v["base_color"]), (len(MU), 3))
     offset = np.stack([diffuse, 2.0 / 3.0 * diffuse, 0.0 * diffuse])  # Lambertian moments
@@ -295,10 +363,9 @@ def preset_errors(preset, data: dict) -> dict:
 
 
 def measured_presets():
-    """The presets whose branch has a fitted correction: Lee's and Cook-Torrance's."""
-    models = {v.model for v in VARIANTS}
+    """The presets whose branch has a fitted correction (variant_of)."""
     return [p for p in sorted(presets.load_all().values(), key=lambda p: p.id)
-            if p.model_id in models]
+            if variant_of(p.model_id, p.resolved()) is not None]
 
 
 def run(progress=print) -> dict:
@@ -327,8 +394,8 @@ def run(progress=print) -> dict:
 def catalog_items() -> dict:
     """The catalog's items the variants depend on, per model (a drift check)."""
     return {m.id: {p.id: list(p.items) for p in m.params
-                   if p.id in ("distribution", "groove", "fresnel_type")}
-            for m in (LEE, COOK_TORRANCE)}
+                   if p.id in ("distribution", "groove", "fresnel_type", "masking")}
+            for m in FIT_MODELS}
 
 
 def write(data: dict, path=None) -> None:

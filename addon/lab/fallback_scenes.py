@@ -62,3 +62,19 @@ def correction_material(model_id: str, values: dict, distribution: str = "MULTI_
         tree.links.new(fallback.correction(branch, distribution), output.inputs["Surface"])
         return material
     return make
+
+
+def scale_material(model_id: str, values: dict, distribution: str = "MULTI_GGX"):
+    """A callable making a material that emits a model's fitted scale (fallback.fitted_scale)
+    as its colour: the factor the native closure is multiplied by, seen per pixel."""
+    model = MODELS[model_id]
+
+    def make():
+        material, tree, output = harness.new_material("scale")
+        branch = fallback.Branch(tree, model, fallback.constant_sources(model, values))
+        emission = tree.nodes.new("ShaderNodeEmission")
+        tree.links.new(fallback.fitted_scale(branch, distribution), emission.inputs["Color"])
+        tree.links.new(emission.outputs[0], output.inputs["Surface"])
+        return material
+    return make
+

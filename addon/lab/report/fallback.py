@@ -8,9 +8,9 @@ against the exact model it stands in for, and what the branch costs where OSL ru
   of pictures (exact, fallback, 4 x |difference|).
 - Cost with OSL on: the presets' grid, and each model's presets alone, rendered with and without
   the branch, alternating; the wall clock of the render call (scene sync and OSL JIT included).
-- Lee's and Cook-Torrance's correction lobes (addon/lab/fallback_fit.py): the numpy albedo
-  and lobe errors of the branch with and without them, as `make fallback-fit` stored them (tests/test_fallback_fit.py
-  holds them to the reference).
+- The fitted corrections (fallback.FITTED, addon/lab/fallback_fit.py): the numpy albedo and
+  lobe errors of the branch with and without them, as `make fallback-fit` stored them
+  (tests/test_fallback_fit.py holds them to the reference).
 """
 from __future__ import annotations
 
@@ -157,19 +157,20 @@ def page(cfg, rows, res) -> list:
 
 
 def fit_lines() -> list:
-    """The numpy errors of Lee's native branch without and with its fitted correction lobe."""
+    """The numpy errors of the native branches without and with their fitted corrections."""
     fit = fallback.fit()
-    lines = ["### The correction lobes and the presets' errors (numpy)", "",
-             "Lee's and Cook-Torrance's branches add a single-scattering Glossy lobe whose "
-             "colour is a polynomial in roughness, Facing and F0 fitted to the reference "
+    lines = ["### The fitted corrections and the presets' errors (numpy)", "",
+             "Lee's, Cook-Torrance's and Heitz 2016's metals add a single-scattering Glossy "
+             "lobe; Heitz 2016's glass and Walter's Separable masking scale the native closure. "
+             "Each is a polynomial in roughness, Facing and F0 fitted to the reference "
              "(`make fallback-fit`). Albedo: "
              "relative error over the training grid (roughness "
              f"{fit['training']['roughness'][0]}-{fit['training']['roughness'][-1]}, "
              f"{len(fit['training']['mu'])} incidences; Fresnel: the presets' metals, "
-             "dielectrics, and for Lee F = 1) or the preset's "
-             "incidences; lobe: the angle between the mean directions of the reflected light "
-             "(plain -> with the lobe). The presets' figures are what the panel and the "
-             "operators tell the artist.",
+             "dielectrics, and F = 1 where the model has it) or the preset's "
+             "incidences; lobe: the angle between the mean directions of the reflected (for "
+             "glass: reflected and transmitted) light (plain -> fitted). The presets' figures "
+             "are what the panel and the operators tell the artist.",
              "", "| variant or preset | albedo worst, plain -> fitted | mean | "
              "lobe mean (deg) | lobe worst (deg) |", "|---|---|---|---|---|"]
     def pair(e, name, stat, fmt):
