@@ -88,7 +88,8 @@ tables: venvs
 	status=0; MICROFACET_LAB_TABLE_RECORD=$(CURDIR)/out/tables-used.txt $(MAKE) test || status=$$?; \
 	$(PY) scripts/seed_tables.py out/tables-used.txt; exit $$status
 
-# Lee's native branch's correction lobe, fitted to the numpy reference (a few minutes).
+# The native branches' fitted corrections (addon/fallback.py, FITTED: Lee, Cook-Torrance, Heitz
+# 2016, Walter's Separable masking), fitted to the numpy reference (about 6 minutes).
 fallback-fit: venv
 	$(PY) scripts/fallback_fit.py
 

@@ -1,6 +1,7 @@
-"""Fit the correction lobe of Lee's native branch to the numpy reference and write it to
-addon/fallback_fit.json (addon/lab/fallback_fit.py). Run with `make fallback-fit` after changing
-Lee's reference or the native branch; tests/test_fallback_fit.py says when it is due."""
+"""Fit the native branches' corrections (addon/fallback.py, FITTED) to the numpy reference and
+write them to addon/fallback_fit.json (addon/lab/fallback_fit.py). Run with `make fallback-fit`
+after changing a fitted model's reference or the native branch; tests/test_fallback_fit.py says
+when it is due."""
 import sys
 from pathlib import Path
 
