@@ -251,8 +251,9 @@ def test_smoke_comparisons_lobes_and_rendered_spheres(smoke):
 @pytest.mark.render
 def test_smoke_fallback_section_measures_every_preset(smoke):
     """The native-branch section: a row per preset with finite albedo errors over the bands
-    of mu, the look's error, the picture, and the OSL-on cost of both variants, for all the
-    presets and for a model's alone (the smoke run times one model)."""
+    of mu, the look's error under the gradient and under the sun, the picture, and the OSL-on
+    cost of both variants, for all the presets and for a model's alone (the smoke run times one
+    model)."""
     from addon import presets
 
     out, _ = smoke
@@ -261,8 +262,9 @@ def test_smoke_fallback_section_measures_every_preset(smoke):
     data = json.loads((out / "results.json").read_text())["fallback"]
     assert [e["preset"] for e in data["presets"]] == sorted(presets.load_all())
     for e in data["presets"]:
-        assert len(e["albedo"]) >= 2 and len(e["gradient"]) == 3, e
+        assert len(e["albedo"]) >= 2 and len(e["gradient"]) == 3 and len(e["sun"]) == 3, e
         assert np.isfinite([b["error"] + b["noise"] for b in e["albedo"]]).all(), e
+        assert np.isfinite(e["gradient"] + e["sun"] + e["gradient_noise"] + e["sun_noise"]).all(), e
         assert re.search(rf"\| {e['preset']} \| .+ \| {NUMBER}% \| {NUMBER}% \| {NUMBER}% \|", page)
     cost = data["cost"]
     assert cost["models"] and cost["models"].keys() <= {e["model"] for e in data["presets"]}
@@ -273,3 +275,26 @@ def test_smoke_fallback_section_measures_every_preset(smoke):
     for model_id, c in cost["models"].items():  # each model's presets, and only those
         assert c["spheres"] == sum(e["model"] == model_id for e in data["presets"]), model_id
     assert (out / "fallback.png").stat().st_size > 1000
+
+
+@pytest.mark.render
+def test_smoke_lookdev_section_compares_noise_with_the_native_closure(smoke):
+    """The look-dev section: for the smoke run's pair and light, finite positive variances over
+    a mask of Suzanne's pixels, the samples and time ratios they give, and the table's row."""
+    out, _ = smoke
+    page = (out / "report.md").read_text()
+    assert "## Look-dev: samples for equal noise against Cycles' closest closure" in page
+    data = json.loads((out / "results.json").read_text())["lookdev"]
+    assert data["mask_pixels"] > 50 and data["entries"], data
+    for e in data["entries"]:
+        for m in (e["ours"], e["native_measure"]):
+            # the cost per sample is NaN where the smoke run's few samples cost below the noise
+            assert m["finite"] and m["variance"] > 0 and m["mean"] > 0, e
+            per_sample = float(m["per_sample"])  # results.json writes NaN as "nan"
+            assert math.isnan(per_sample) or per_sample > 0, e
+        assert e["samples_ratio"] == pytest.approx(
+            e["ours"]["variance"] / e["native_measure"]["variance"])
+        assert float(e["time_ratio"]) == pytest.approx(e["samples_ratio"] * float(e["cost_ratio"]),
+                                                       nan_ok=True)
+        assert re.search(rf"\| {e['preset']} \| {e['native']} \| x{NUMBER} \((x{NUMBER}|time -)\) \|",
+                         page)

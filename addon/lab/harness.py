@@ -297,12 +297,15 @@ def render(scene, path: str | None = None) -> tuple[np.ndarray, float]:
 def render_specs(specs: list, env: Environment, samples: int, seed: int = 0, cols: int = 4,
                  cell_px: int = 32, path: str | None = None, materials: list | None = None,
                  solid: bool = False, max_bounces: int = 4, light_sampling: bool = True,
-                 osl: bool = True):
+                 osl: bool = True, lamps=None):
     """Build and render a grid of SphereSpecs (or of ready-made `materials`, made by a callable
     run after the scene is reset). Returns (layout, image, seconds). `osl` False renders with
-    Open Shading Language off (the node groups' native branches, addon/fallback.py)."""
+    Open Shading Language off (the node groups' native branches, addon/fallback.py); `lamps`,
+    a callable, adds lamps to the scene."""
     scene, layout = _spec_scene(specs, env, samples, seed, cols, cell_px, materials, solid,
                                 max_bounces, light_sampling, osl)
+    if lamps is not None:
+        lamps(scene)
     image, seconds = render(scene, path)
     return layout, image, seconds
 

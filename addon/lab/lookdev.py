@@ -23,6 +23,8 @@ SUN_STRENGTH = 4.0
 SUN_DIRECTION = (-0.45, -0.55, 0.70)  # toward the sun
 AREA_POWER = 400.0  # W
 AREA_SIZE = 1.5
+POINT_POWER = 400.0  # W
+LAMP_POSITION = (2.5, -1.0, 2.5)  # the area and point lamps, aimed at Suzanne
 
 
 def add_sky(scene):
@@ -82,21 +84,45 @@ def add_floor(scene):
                      (0.35, 0.35, 0.33), roughness=0.8)
 
 
-def add_lamps(scene):
+def add_sun(scene, angle_deg: float = SUN_ANGLE_DEG):
     import bpy
     import mathutils
 
     sun = bpy.data.lights.new("Sun", "SUN")
     sun.energy = SUN_STRENGTH
-    sun.angle = math.radians(SUN_ANGLE_DEG)
+    sun.angle = math.radians(angle_deg)
     obj = _add_object(scene, "Sun", sun)
     obj.rotation_euler = mathutils.Vector(SUN_DIRECTION).to_track_quat("Z", "Y").to_euler()
-    area = bpy.data.lights.new("Area", "AREA")
-    area.energy = AREA_POWER
-    area.size = AREA_SIZE
-    position = mathutils.Vector((2.5, -1.0, 2.5))
-    obj = _add_object(scene, "Area", area, tuple(position))
-    obj.rotation_euler = (-position + mathutils.Vector((0, 0, 0.7))).to_track_quat("-Z", "Y").to_euler()
+    return obj
+
+
+def _aimed_lamp(scene, kind: str, energy: float, position):
+    """A lamp at `position` aimed at Suzanne."""
+    import bpy
+    import mathutils
+
+    lamp = bpy.data.lights.new(kind.title(), kind)
+    lamp.energy = energy
+    obj = _add_object(scene, kind.title(), lamp, tuple(position))
+    target = mathutils.Vector((0.0, 0.0, 0.7))
+    obj.rotation_euler = (target - mathutils.Vector(position)).to_track_quat("-Z", "Y").to_euler()
+    return obj
+
+
+def add_area(scene):
+    obj = _aimed_lamp(scene, "AREA", AREA_POWER, LAMP_POSITION)
+    obj.data.size = AREA_SIZE
+    return obj
+
+
+def add_point(scene):
+    """A point lamp where the area lamp is (Blender's default radius, 0.1 m)."""
+    return _aimed_lamp(scene, "POINT", POINT_POWER, LAMP_POSITION)
+
+
+def add_lamps(scene):
+    add_sun(scene)
+    add_area(scene)
 
 
 def add_camera(scene, width, height):
@@ -117,7 +143,8 @@ def add_camera(scene, width, height):
 # --- the materials ---------------------------------------------------------------------------
 
 def native_material(kind: str, values: dict):
-    """Cycles' closest native material for a pair (kind: metallic, glass, principled)."""
+    """Cycles' closest native material for a pair (kind: metallic, glass or principled, the
+    first two with _multiscatter or _beckmann for that distribution)."""
     import bpy
 
     material = bpy.data.materials.new(f"native {kind}")
@@ -126,15 +153,18 @@ def native_material(kind: str, values: dict):
     for node in list(tree.nodes):
         tree.nodes.remove(node)
     out = tree.nodes.new("ShaderNodeOutputMaterial")
-    if kind in ("metallic", "metallic_multiscatter"):
+    # kind: the node and its distribution (GGX unless named)
+    distribution = {"multiscatter": "MULTI_GGX", "beckmann": "BECKMANN"}.get(
+        kind.partition("_")[2], "GGX")
+    if kind.startswith("metallic"):
         node = tree.nodes.new("ShaderNodeBsdfMetallic")
         node.fresnel_type = "PHYSICAL_CONDUCTOR"
-        node.distribution = "MULTI_GGX" if kind == "metallic_multiscatter" else "GGX"
+        node.distribution = distribution
         node.inputs["IOR"].default_value = values["n"]
         node.inputs["Extinction"].default_value = values["k"]
-    elif kind == "glass":
+    elif kind.startswith("glass"):
         node = tree.nodes.new("ShaderNodeBsdfGlass")
-        node.distribution = "GGX"
+        node.distribution = distribution
         node.inputs["IOR"].default_value = values["ior"]
     else:
         node = tree.nodes.new("ShaderNodeBsdfPrincipled")
@@ -170,9 +200,10 @@ def pairs():
     return rows
 
 
-def build_view(material, width: int, height: int, seed: int = 0):
+def build_view(material, width: int, height: int, seed: int = 0, lamps=add_lamps):
     """The look-dev scene with `material` on Suzanne (Blender's defaults otherwise: Clamp
-    Indirect 10, Filter Glossy 1, light tree; no denoiser, so the noise shows)."""
+    Indirect 10, Filter Glossy 1, light tree; no denoiser, so the noise shows); `lamps(scene)`
+    adds the lamps (default: the sun and the area lamp)."""
     scene = harness.new_scene()
     cycles = scene.cycles
     cycles.use_adaptive_sampling = False
@@ -185,7 +216,7 @@ def build_view(material, width: int, height: int, seed: int = 0):
     render.use_file_extension = False
     add_sky(scene)
     add_floor(scene)
-    add_lamps(scene)
+    lamps(scene)
     add_camera(scene, width, height)
     add_suzanne(scene, material() if callable(material) else material)
     return scene

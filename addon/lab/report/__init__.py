@@ -19,7 +19,12 @@ and draws its plots, its `page(cfg, rows, results)` returns its Markdown lines:
    against single scattering and Cycles' multi-GGX (table and picture), render cost per sample
    against the Cook-Torrance shader measured side by side, the closed-form albedo against the
    brute-force tracer at equal error, and the accuracy of the moment rules.
-6. `optix`: the OptiX comparison, only where bpy reports an OptiX device (untested without one);
+6. `specialization`, `multiple_scattering` ("comparisons"), `fallback`: what a scene's
+   specialization saves, the seed's comparisons of multiple-scattering models, the native
+   branches against the exact models.
+7. `lookdev_noise` ("lookdev"): samples and time for equal noise against Cycles' closest
+   closure on the look-dev scene, per preset and light.
+8. `optix`: the OptiX comparison, only where bpy reports an OptiX device (untested without one);
    run with section 1, stated in the page header.
 
 Shared modules: `config` (modes, constants, progress), `rows` (model variants x samplers,

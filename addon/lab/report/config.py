@@ -37,7 +37,7 @@ GOLD = {"fresnel_type": "conductor"}  # catalog default n, k (gold)
 CONVERGENCE_ROUGHNESS = (0.2, 0.5, 0.8)  # the spheres of each convergence row
 # --sections
 SECTIONS = ("convergence", "share", "samplers", "refcost", "stability", "lee", "specialization",
-            "comparisons", "fallback")
+            "comparisons", "fallback", "lookdev")
 
 
 @dataclass

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import (convergence, fallback, lee, multiple_scattering, native_share, reference_cost,
-               samplers, specialization, stability_section)
+from . import (convergence, fallback, lee, lookdev_noise, multiple_scattering, native_share,
+               reference_cost, samplers, specialization, stability_section)
 from .config import SECTIONS, Progress, config
 from .machine import header_lines, machine_info
 from .page import write_page
@@ -22,7 +22,7 @@ from .rows import build_rows
 SECTION_MODULES = (("convergence", convergence), ("share", native_share), ("samplers", samplers),
                    ("refcost", reference_cost), ("stability", stability_section), ("lee", lee),
                    ("specialization", specialization), ("comparisons", multiple_scattering),
-                   ("fallback", fallback))
+                   ("fallback", fallback), ("lookdev", lookdev_noise))
 README_FIGURES = ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png", "fallback.png")
 
 
@@ -64,6 +64,7 @@ def results_json(mode, info, notes, total, res) -> dict:
             "time_to_target": res.get("table"), "sun_calibration": res.get("sun_cal"),
             "native_share": res.get("native_share"), "specialization": res.get("specialization"),
             "comparisons": res.get("comparisons"), "fallback": res.get("fallback"),
+            "lookdev": res.get("lookdev"),
             "reference_cost": res.get("refcost"), "gpu": res.get("gpu"),
             "convergence": {e: d["series"] for e, d in conv["envs"].items()} if conv else None,
             "sampler_study": {m: {f"{s} r={r}": v for (s, r), v in by_sampler.items()}
