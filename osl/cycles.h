@@ -110,15 +110,16 @@ closure color refraction_toward(vector wi, vector wo, float eta)
 // min(0.9 I.Ng, 0.01) above the geometric surface (ensure_valid_specular_reflection in
 // kernel/closure/bsdf_util.h, under the material's bump map correction, on by default; always
 // applied to ours, whose normal m is not Ng), and without it rejects a direction below Ng. A
-// delta drawn lower would leave along that horizon with the weight of the direction drawn and
-// find a lamp sitting there: a rare, heavy sample (Suzanne's smooth-shaded brow with a point
-// lamp on its faces' horizon: single samples 4,000 times the pixel's mean). So such a delta is
-// not returned: the lobe loses the directions under the geometric surface, as Cycles' own
-// closures do (their sampler rejects them), and stays exact above it.
+// delta drawn under the geometric surface would leave along that line with the weight of the
+// direction drawn and find a lamp sitting there: a rare, heavy sample (Suzanne's smooth-shaded
+// brow with a point lamp on its faces' horizon: single samples 4,000 times the pixel's mean).
+// So such a delta is not returned: the lobe loses the directions under the geometric surface,
+// as Cycles' own closures do (their sampler rejects them), and stays exact above it. A
+// direction between the surface and the line is moved onto the line, as before (on a sphere,
+// Ng = N, those are all there is: a white furnace stays exactly 1 at grazing incidence).
 int clears_surface(normal m)
 {
-    vector r = 2.0 * dot(m, I) * m - I;
-    return dot(Ng, r) >= min(0.9 * dot(I, Ng), 0.01);
+    return dot(Ng, 2.0 * dot(m, I) * m - I) >= 0.0;
 }
 
 // The delta reflection about the microfacet normal m (world space) where its direction clears
