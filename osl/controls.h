@@ -33,6 +33,7 @@
 #define MFL_CONTROL_GROW_MAX 0.1
 #define MFL_CONTROL_MIN_HALF_ANGLE 2e-3
 #define MFL_CONTROL_HORIZON_MARGIN 0.01
+#define MFL_AIM_HELD_SLACK 1e-6
 
 // ---------------------------------------------------------------------------------------
 // The bound of r cos = F D G / (4 wi.n) over a cone of directions wo (axis a, half-angle th).
@@ -178,7 +179,8 @@ int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_S
 // lamp on the horizon of a smooth-shaded face was found by chance only (rough Lee gold under the
 // look-dev point lamp: single samples 1,000 times a pixel's mean).
 int add_aim_cones(point P, normal Ns, int count, output vector axes[MFL_CONTROL_SLOTS],
-                  output float ths[MFL_CONTROL_SLOTS], output color weights[MFL_CONTROL_SLOTS])
+                  output float ths[MFL_CONTROL_SLOTS], output float lamp_ths[MFL_CONTROL_SLOTS],
+                  output color weights[MFL_CONTROL_SLOTS])
 {
     int n = count;
 #if MFL_LAMP_COUNT > 0
@@ -188,14 +190,15 @@ int add_aim_cones(point P, normal Ns, int count, output vector axes[MFL_CONTROL_
         if (lamp_weight(i, P, Ns) <= 0.0 || !lamp_bounding_cone(i, P, a, th) ||
             th >= 0.5 * MFL_PI)
             continue;
-        int held = 0;
+        int held = 0;  // within a cone already (the lamp's own control cone, rounding aside)
         for (int j = 0; j < n; j++)
-            if (acos(clamp(dot(a, axes[j]), -1.0, 1.0)) + th <= ths[j])
+            if (dot(a, axes[j]) >= cos(max(ths[j] - th, 0.0)) - MFL_AIM_HELD_SLACK)
                 held = 1;
         if (held)
             continue;
         axes[n] = a;
         ths[n] = max(th, MFL_CONTROL_MIN_HALF_ANGLE);
+        lamp_ths[n] = ths[n];
         weights[n] = color(0.0);
         n += 1;
     }
@@ -239,17 +242,20 @@ color control_cone(int masking, int dist, int fresnel_type, int split, vector wi
 
 // The controls of a reflection residual (masking, dist, ... as cone_value_lo; split: whether the
 // GGX native part is returned beside it): their closures, tint times w_K times the toon;
-// weights[j] = w_K without the tint (0 where left out) and ths[j] its cone, for controls_value.
+// weights[j] = w_K without the tint (0 where left out) and ths[j] its cone, for controls_value;
+// lamp_ths[j] the lamp's own cone within it.
 closure color control_terms(int masking, int dist, int fresnel_type, int split, vector wi,
                             vector t, vector b, float ax, float ay, float ior, color n, color k,
                             color tint, output vector axes[MFL_CONTROL_SLOTS],
                             output float ths[MFL_CONTROL_SLOTS],
+                            output float lamp_ths[MFL_CONTROL_SLOTS],
                             output color weights[MFL_CONTROL_SLOTS], output int count)
 {
     closure color controls = 0;
     count = select_cones(P, Ng, N, axes, ths);
     for (int j = 0; j < count; j++) {
         float th = ths[j];
+        lamp_ths[j] = th;
         color w = control_cone(masking, dist, fresnel_type, split, wi, to_local(axes[j], t, b, N),
                                th, ax, ay, ior, n, k, tint);
         if (w[0] + w[1] + w[2] > 0.0)  // a cone left without a control stays the lamp's

@@ -173,6 +173,21 @@ def test_cones_that_reach_the_horizon_or_overlap_are_left_out():
     assert [bool(v[0]) for _, _, v in chosen] == [False, True, False]
 
 
+def test_lamps_without_a_control_still_get_an_aim_cone():
+    """add_aim_cones (Lee aims into cones only): the lamp on the horizon and the one overlapping
+    a chosen cone, both left without a control, get a cone to aim at, with no weight; the chosen
+    lamp is not added twice. Without it a small lamp on the horizon of a smooth-shaded face was
+    found by chance (rough Lee gold under the look-dev point lamp: 7 times the variance)."""
+    low = records_mod.sun_record((1.0, 0.0, 0.02), math.radians(4.0), 1.0)
+    twin = records_mod.sun_record((0.4, -0.2, 0.9), math.radians(4.0), 1.0)
+    P, Ng = P0[None], np.array([[0.0, 0.0, 1.0]])
+    chosen = controls.select_cones([low, SUN, twin], P, Ng)
+    cones = controls.add_aim_cones([low, SUN, twin], P, Ng, chosen)
+    assert [bool(v[0]) for _, _, v in cones] == [False, True, False, True, False, True]
+    full = controls.add_aim_cones([low, SUN, twin], P, Ng, chosen * 4)  # four slots taken
+    assert not any(bool(v[0]) for _, _, v in full[12:])
+
+
 def test_osl_constants_are_the_numpy_ones():
     src = osl_text.source("controls.h")
     for name, value in (("SLOTS", controls.CONTROL_SLOTS), ("MIN_WEIGHT", controls.MIN_WEIGHT),
@@ -180,6 +195,7 @@ def test_osl_constants_are_the_numpy_ones():
                         ("HORIZON_MARGIN", controls.HORIZON_MARGIN),
                         ("GROW_CAP", controls.GROW_CAP), ("GROW_MAX", controls.GROW_MAX)):
         assert osl_text.define_float(src, f"MFL_CONTROL_{name}") == value, name
+    assert osl_text.define_float(src, "MFL_AIM_HELD_SLACK") == controls.AIM_HELD_SLACK
 
 
 # --- Lee's V-grooves (symmetric): controls on the first bounce, the first bounces aimed ---------

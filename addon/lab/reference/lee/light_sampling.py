@@ -38,15 +38,41 @@ def first_order(bsdf: LeeBRDF):
 
 
 def aimed_cones(bsdf: LeeBRDF, records, P, wi):
-    """[(axis, th, w_K, valid)] as controls.control_terms gives them: symmetric grooves have
-    lamp controls on their first bounce (the V-cavity term); an asymmetric groove's first
-    bounce is not that term, so there the cones are the lamps' own, with no control (w_K = 0)."""
-    if bsdf.groove == "symmetric":
-        return controls.control_terms(first_order(bsdf), records, P, wi)
+    """[(axis, th, w_K, valid, th_lamp)]: the cones as controls.control_terms gives them
+    (symmetric grooves have lamp controls on their first bounce, the V-cavity term; an
+    asymmetric groove's first bounce is not that term, so there the cones are the lamps' own,
+    with no control, w_K = 0), then controls.add_aim_cones' (the lamps left without one, no
+    control); th_lamp is the lamp's own cone inside th (th where the cone is not widened)."""
+    P = np.asarray(P, dtype=float)
     zero = np.zeros(np.shape(wi))
     Ng = np.broadcast_to(np.array([0.0, 0.0, 1.0]), np.shape(P))
-    return [(axis, np.where(valid, th, controls.MIN_HALF_ANGLE), zero, valid)
-            for axis, th, valid in controls.select_cones(records, P, Ng)]
+    if bsdf.groove == "symmetric":
+        terms = [(axis, th, w, valid, np.where(valid, controls.lamp_bounding_cone(rec, P)[1], th))
+                 for rec, (axis, th, w, valid)
+                 in zip(records, controls.control_terms(first_order(bsdf), records, P, wi))]
+    else:
+        terms = [(axis, np.where(valid, th, controls.MIN_HALF_ANGLE), zero, valid,
+                  np.where(valid, th, controls.MIN_HALF_ANGLE))
+                 for axis, th, valid in controls.select_cones(records, P, Ng)]
+    chosen = [(axis, th, valid) for axis, th, _, valid, _ in terms]
+    added = controls.add_aim_cones(records, P, Ng, chosen)[len(chosen):]
+    return terms + [(axis, th, zero, valid, th) for axis, th, valid in added]
+
+
+def cones_pdf(terms, wo):
+    """osl cones_pdf: the density of sample_light_sampled's aimed direction, each valid cone
+    with probability 1 / count; in a widened cone half uniform over it, half over the lamp's
+    own cone."""
+    valid = np.stack([v for *_, v, _ in terms], -1)
+    count = valid.sum(-1)
+    pdf = 0.0
+    for axis, th, _, v, th_l in terms:
+        widened = th_l < th
+        full = controls.toon_value(axis, th, wo)
+        lamp = controls.toon_value(axis, th_l, wo)
+        pdf = pdf + np.where(v, np.where(widened, 0.5 * (full + np.where(full > 0, lamp, 0.0)),
+                                         full), 0.0)
+    return np.where(count > 0, pdf / np.maximum(count, 1), 0.0)
 
 
 def low_orders(bsdf: LeeBRDF, wi, wo, u):
@@ -68,35 +94,35 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     RGB of the delta lobe, tint included, terms: the controls as controls.control_terms gives
     them, which ride on every sample). With A the chosen cones (each lamp's, widened where it
     has a control; aimed_cones) and lam = GUIDE_FRACTION where there are any: with probability
-    lam a direction uniform in one of them (each with probability 1 / count), weighted by
+    lam a direction in one of them (each with probability 1 / count; uniform in it, or where a
+    control widened it, half the time uniform in the lamp's own cone: cones_pdf), weighted by
     (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p) (low_orders); otherwise a path of the sampler,
     its exit dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (...,
     uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
     terms = aimed_cones(bsdf, records, P, wi)
-    valid = np.stack([v for *_, v in terms], -1) if terms else np.zeros((n, 0), bool)
+    valid = np.stack([v for *_, v, _ in terms], -1) if terms else np.zeros((n, 0), bool)
     count = valid.sum(-1)
     # The OSL keeps the valid cones first, in table order: the j-th valid one is slot j.
     lam = np.where(count > 0, GUIDE_FRACTION, 0.0)
     wo_s, w_s, k_s = bsdf.sample(wi, u[..., :6])
     wo = wo_s.copy()
     aimed = u[:, 6] < lam
-    slot = np.minimum(np.floor(u[:, 7] * count), np.maximum(count - 1, 0)).astype(int)
+    x = u[:, 7] * count
+    slot = np.minimum(np.floor(x), np.maximum(count - 1, 0)).astype(int)
+    to_lamp = x - slot < 0.5
     rank = np.cumsum(valid, -1) - 1
-    for j, (axis, th, _, _) in enumerate(terms):
+    for j, (axis, th, _, _, th_l) in enumerate(terms):
         sel = aimed & valid[:, j] & (rank[:, j] == slot)
         if np.any(sel):
             a = np.broadcast_to(axis, (n, 3))[sel]
-            omc = 2.0 * np.sin(0.5 * np.broadcast_to(th, (n,))[sel]) ** 2
-            wo[sel] = sample_cone(a, omc, u[sel, 8], u[sel, 9])
-    p_aim = np.zeros(n)
-    inside = np.zeros(n, bool)
-    for j, (axis, th, _, _) in enumerate(terms):
-        t_j = np.where(valid[:, j], controls.toon_value(axis, th, wo), 0.0)
-        p_aim += t_j
-        inside |= t_j > 0.0
-    p_aim = np.where(count > 0, p_aim / np.maximum(count, 1), 0.0)
+            th_j, th_lj = np.broadcast_to(th, (n,))[sel], np.broadcast_to(th_l, (n,))[sel]
+            cone = np.where((th_lj < th_j) & to_lamp[sel], th_lj, th_j)
+            wo[sel] = sample_cone(a, 2.0 * np.sin(0.5 * cone) ** 2, u[sel, 8], u[sel, 9])
+    p_aim = cones_pdf(terms, wo) if terms else np.zeros(n)
+    inside = p_aim > 0.0
+    terms = [t[:4] for t in terms]
     low = low_orders(bsdf, wi, wo, u)
     r = low * np.maximum(wo[:, 2], 0.0)[:, None] - controls.controls_value(terms, wo)
     ok = p_aim > 0.0
