@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import controls
-from ..bsdf import MicrofacetBRDF
+from ..bsdf import MicrofacetBRDF, reflection_pdf
 from ..lamps import GUIDE_FRACTION, sample_cone
 from .asymmetric import eval_asymmetric
 from .model import LeeBRDF
@@ -59,6 +59,15 @@ def aimed_cones(bsdf: LeeBRDF, records, P, wi):
     return terms + [(axis, th, zero, valid, th) for axis, th, valid in added]
 
 
+def mis_density(bsdf: LeeBRDF, wi, wo):
+    """osl lee_mis_density: the density the balance heuristic between the aimed cones and the
+    sampler uses for the sampler, whose exits' density has no closed form: the first order's
+    visible-normal density (any density used in both weights keeps the estimate exact)."""
+    h = wi + wo
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
+    return reflection_pdf(first_order(bsdf), wi, h)
+
+
 def cones_pdf(terms, wo):
     """osl cones_pdf: the density of sample_light_sampled's aimed direction, each valid cone
     with probability 1 / count; in a widened cone half uniform over it, half over the lamp's
@@ -96,8 +105,11 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     has a control; aimed_cones) and lam = GUIDE_FRACTION where there are any: with probability
     lam a direction in one of them (each with probability 1 / count; uniform in it, or where a
     control widened it, half the time uniform in the lamp's own cone: cones_pdf), weighted by
-    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p) (low_orders); otherwise a path of the sampler,
-    its exit dropped where k <= AIMED_ORDERS and wo lies in A, else over 1 - lam. u: (...,
+    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p + (1 - lam) q) (low_orders; q = mis_density);
+    otherwise a path of the sampler over 1 - lam, its exit where k <= AIMED_ORDERS and wo lies
+    in A times the balance heuristic's share (1 - lam) q / (lam p + (1 - lam) q) and, beside
+    controls, 1 - sum w t / (f_{k<=AIMED_ORDERS} cos) (exact for any q: the two weights sum to 1
+    at every direction, Veach 1997 sec. 9.2). u: (...,
     uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
@@ -124,11 +136,20 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     inside = p_aim > 0.0
     terms = [t[:4] for t in terms]
     low = low_orders(bsdf, wi, wo, u)
-    r = low * np.maximum(wo[:, 2], 0.0)[:, None] - controls.controls_value(terms, wo)
+    carried = controls.controls_value(terms, wo)
+    r = low * np.maximum(wo[:, 2], 0.0)[:, None] - carried
+    q = (1.0 - lam) * mis_density(bsdf, wi, wo)
     ok = p_aim > 0.0
-    w_aim = np.where(ok[:, None], np.maximum(r, 0.0) / np.where(ok, lam * p_aim, 1.0)[:, None],
+    w_aim = np.where(ok[:, None], np.maximum(r, 0.0) / np.where(ok, lam * p_aim + q, 1.0)[:, None],
                      0.0)
-    drop = (k_s <= AIMED_ORDERS) & inside
-    w_path = np.where((count > 0)[:, None],
-                      np.where(drop[:, None], 0.0, w_s / (1.0 - lam)[:, None]), w_s)
+    # A path's exit inside the cones with k <= AIMED_ORDERS: the balance heuristic's share
+    # q / (lam p + q), less the controls' share of the first bounce terms there (symmetric
+    # grooves; low is their closed form at the path's own exit, wo_s = wo off the aimed branch).
+    both = (k_s <= AIMED_ORDERS) & inside
+    share = np.where(both, q / np.where(both, lam * p_aim + q, 1.0), 1.0)[:, None]
+    low_cos = low * np.maximum(wo[:, 2], 0.0)[:, None]
+    less = np.where(low_cos > 0.0, np.maximum(1.0 - carried / np.where(low_cos > 0.0, low_cos,
+                                                                        1.0), 0.0), 0.0)
+    share = share * np.where((both & (np.sum(carried, -1) > 0.0))[:, None], less, 1.0)
+    w_path = np.where((count > 0)[:, None], w_s * share / (1.0 - lam)[:, None], w_s)
     return wo, np.where(aimed[:, None], w_aim, w_path), terms
