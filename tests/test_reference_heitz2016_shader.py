@@ -179,3 +179,12 @@ def test_eval_residual_is_the_residual_pointwise():
         expected = full[0] - c * first[0]
         z = z_of(r.mean(0), r.std(0) / math.sqrt(n), expected, full_se[0])
         assert (np.abs(z) < 4.5).all(), f"wo {wo}: {r.mean(0)} vs {expected} z {z}"
+
+
+def test_the_shader_averages_as_many_walks_as_the_twin():
+    """osl MFL_HEITZ_EVAL_WALKS is the twin's EVAL_WALKS (what the aimed tests above hold)."""
+    import osl_text  # tests/osl_text.py
+    from addon.lab.reference.heitz2016 import light_sampling
+
+    src = osl_text.source("heitz2016.osl")
+    assert osl_text.define_float(src, "MFL_HEITZ_EVAL_WALKS") == light_sampling.EVAL_WALKS

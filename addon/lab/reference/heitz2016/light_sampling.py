@@ -27,12 +27,22 @@ def eval_residual(walk: HeitzConductor, wi, wo, c, rng, max_order: int = MAX_ORD
     return first + higher
 
 
+# Walks averaged per aimed direction (osl MFL_HEITZ_EVAL_WALKS).
+EVAL_WALKS = 4
+
+
+def eval_residual_mean(walk: HeitzConductor, wi, wo, c, rng, max_order: int = MAX_ORDER,
+                       walks: int = EVAL_WALKS):
+    """The mean of `walks` independent eval_residual estimates (osl eval_residual_mean)."""
+    return sum(eval_residual(walk, wi, wo, c, rng, max_order) for _ in range(walks)) / walks
+
+
 def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
                           max_order: int = MAX_ORDER):
     """The shader's residual sample with the lamps (osl/heitz2016.osl, lamps.py twin): rows of
     wi at points P (normal z). The directions toward the lamps, L = {lamps_pdf > 0}, and the
     rest are two integrals: with probability lam a direction from lamps_pdf weighted
-    eval_residual / (lam lamps_pdf) covers L, otherwise the walk (its first-order exit
+    eval_residual_mean / (lam lamps_pdf) covers L, otherwise the walk (its first-order exit
     weighing F (1 - c), later orders their throughput) counted only outside L, over 1 - lam,
     covers the rest. Returns (wo, weight RGB); E[weight g(wo)] = integral r |cos| g for any
     records (a stale table moves noise only)."""
@@ -50,7 +60,7 @@ def sample_aimed_residual(walk: HeitzConductor, records, P, wi, c, rng,
         d = lamp_twin.sample_lamps(records, P[a], Ng[a], u[a, 1], u[a, 2], u[a, 3])
         p = lamp_twin.lamps_pdf(records, P[a], Ng[a], d)
         ok = (d[:, 2] > 0.0) & (p > 0.0)
-        r = eval_residual(walk, wi[a], d, c, rng, max_order)
+        r = eval_residual_mean(walk, wi[a], d, c, rng, max_order)
         wo[a] = d
         weight[a] = np.where(ok[:, None], r / np.where(ok, lam[a] * p, 1.0)[:, None], 0.0)
     rest = np.nonzero(~aimed)[0]
