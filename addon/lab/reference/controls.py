@@ -42,7 +42,7 @@ GROW_CAP = 0.5
 GROW_MAX = 0.1
 MIN_HALF_ANGLE = 2e-3
 HORIZON_MARGIN = 0.01
-AIM_HELD_SLACK = 1e-6  # cos slack of add_aim_cones' "held" test (a lamp inside its own control cone)
+AIM_HELD_SLACK = 1e-6  # cos slack of add_aim_cones' test of a lamp inside a cone (its own)
 
 
 def cone_half_vectors(wi, axis, th):
