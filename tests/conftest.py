@@ -17,7 +17,7 @@ two lanes never both pay for one fixture (the report's smoke run is two minutes)
 import pytest
 
 RENDERING_FIXTURES = {"smoke"}  # tests/test_report.py: the report's smoke run
-RENDER_LANE_MODULES = {"test_reference_controls.py", "test_stability.py", "test_fallback_fit.py"}
+RENDER_LANE_MODULES = {"test_stability.py", "test_fallback_fit.py"}
 
 
 @pytest.hookimpl(tryfirst=True)
