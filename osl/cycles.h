@@ -112,7 +112,8 @@ closure color refraction_toward(vector wi, vector wo, float eta)
 // applied to ours, whose normal m is not Ng), and without it rejects a direction below Ng. A
 // delta drawn under the geometric surface would leave along that line with the weight of the
 // direction drawn and find a lamp sitting there: a rare, heavy sample (Suzanne's smooth-shaded
-// brow with a point lamp on its faces' horizon: single samples 4,000 times the pixel's mean).
+// brow with a point lamp on its faces' horizon: single samples over 1,000 times the pixel's
+// mean).
 // So such a delta is not returned: the lobe loses the directions under the geometric surface,
 // as Cycles' own closures do (their sampler rejects them), and stays exact above it. A
 // direction between the surface and the line is moved onto the line, as before (on a sphere,

@@ -5,7 +5,7 @@ Cycles turns a reflection closure's normal so that its mirror direction rises at
 min(0.9 wi.Ng, 0.01) above the horizon of the face's own normal Ng. Our deltas' normals are
 microfacet normals, so a direction drawn under the face left along that line with the weight of
 the direction drawn: where a lamp sat on a smooth-shaded face's horizon (Suzanne's brow under
-the look-dev point lamp) single samples carried thousands of times a pixel's mean. The shaders
+the look-dev point lamp) single samples carried over 1,000 times a pixel's mean. The shaders
 now drop a delta under the face, as Cycles' own closures reject such a direction.
 
 Scene: a square whose shading normal N (a custom normal) leans BETA from its face normal Ng,
