@@ -7,6 +7,7 @@ section; its __init__ lists them).
     python scripts/report.py            # full (about 30-36 min on 2 cores); refreshes docs/figures
     python scripts/report.py --quick    # about 5 minutes
     python scripts/report.py --smoke    # seconds: 2 sample counts, one tiny grid, one environment
+    python scripts/report.py --quick --sections convergence --rows "Heitz 2016" --envs sun,point
 """
 import argparse
 import sys
@@ -29,13 +30,20 @@ def main(argv=None):
 
     parser.add_argument("--sections", default=",".join(SECTIONS),
                         help="comma-separated subset of " + ",".join(SECTIONS))
+    parser.add_argument("--rows", default="",
+                        help="comma-separated words: only the convergence rows whose variant "
+                             "contains one (e.g. 'Heitz 2016')")
+    parser.add_argument("--envs", default="",
+                        help="comma-separated subset of the mode's environments (e.g. sun,point)")
     args = parser.parse_args(argv)
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
     figures = args.figures or (str(ROOT / "docs" / "figures") if mode == "full" else None)
 
     from addon.lab import report
 
-    report.run(mode, args.out, figures, sections=tuple(args.sections.split(",")))
+    report.run(mode, args.out, figures, sections=tuple(args.sections.split(",")),
+               rows=tuple(w for w in args.rows.split(",") if w),
+               envs=tuple(e for e in args.envs.split(",") if e))
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.report.lights import point_radiance, spot_image, sun_unit  # noqa: E402
 from addon.lab.report.references import (area_lamp_term, image_world_term,  # noqa: E402
                                          point_lamp_term, sun_term)
-from addon.lab.report.scenes import add_image_world, add_point_lamp, add_sun  # noqa: E402
+from addon.lab.report.scenes import add_point_lamp, add_sun  # noqa: E402
 import osl_text  # noqa: E402 (tests/osl_text.py)
 
 SAMPLES = 256
@@ -411,8 +411,9 @@ WORLD_SPOT_SAMPLES = 2 * AIMED_SAMPLES  # 512 left 4.2.23 just short of the powe
 
 def test_aimed_residual_matches_an_image_world_spot():
     radiance = spot_image(128, 64, sun_unit(), math.radians(3.0), 200.0)
-    layout, image = _render_row(WORLD_SPOT_ROW, lambda scene: add_image_world(scene, radiance),
-                                17, samples=WORLD_SPOT_SAMPLES, cell_px=64)
+    layout, image = _render_row(WORLD_SPOT_ROW,
+                                lambda scene: harness.add_image_world(scene, radiance), 17,
+                                samples=WORLD_SPOT_SAMPLES, cell_px=64)
     assert _lamp_count_in_texts() == 1  # the spot, and no lamp
     layout, image, reference, quad_err = _with_quadrature_error(
         layout, image, lambda n: _term(image_world_term, layout, WORLD_SPOT_ROW, radiance, n[0]),

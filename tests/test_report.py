@@ -196,6 +196,27 @@ def test_time_to_target_interpolates_on_log_log():
     assert report.time_to_target([(1, 0.5, 0.005)]) == (0.5, "first")
 
 
+def test_every_model_runs_under_every_lamp_heitz_held_to_itself_there():
+    # Would catch a model left out of a lamp's time-to-1% table again (Heitz 2016 was: its
+    # numpy evaluation is a walk), or a walk's noisy evaluation used as a lamp's reference.
+    from addon.lab.report import config, convergence, rows as report_rows
+
+    notes = []
+    rows = report_rows.build_rows(notes)
+    per_env = convergence.rows_per_env(config.config("full"), rows)
+    heitz = [r for r in rows if r.model_id == "heitz2016"]
+    assert heitz and any(r.variant == heitz[0].variant and r.sampler == "native" for r in rows)
+    for env, env_rows in per_env.items():
+        assert [r.key for r in rows if r not in env_rows] == [], env
+        lamp = env in config.LAMP_ENVS
+        for r in heitz:
+            assert report_rows.self_referenced(r, env) == lamp, (env, r.key)
+            specs = report_rows.specs_for(r, (0.5,), env)
+            assert (specs == [None]) == lamp, (env, r.key)
+    assert not any(report_rows.self_referenced(r, "point") for r in rows
+                   if r.model_id in ("walter_reflection", "cook_torrance", "lee_vgroove"))
+
+
 def test_sun_cone_rule_integrates_the_solid_angle_and_a_cosine():
     half = math.radians(report.SUN_ANGLE_DEG) / 2
     dirs, w = report.sun_cone_nodes(half, 8, 16)

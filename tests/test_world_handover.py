@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environm
 from addon import compat, handover, world_lights  # noqa: E402
 from addon.lab import grid, harness  # noqa: E402
 from addon.lab.report.lights import spot_image  # noqa: E402
-from addon.lab.report.scenes import add_image_world, add_spot_world  # noqa: E402
+from addon.lab.report.scenes import add_spot_world  # noqa: E402
 
 SPOT = np.array([0.6, 0.48, 0.64]) / np.linalg.norm([0.6, 0.48, 0.64])
 MIRROR = grid.GridLayout(1, 1, cell_px=200)
@@ -83,7 +83,7 @@ def test_a_world_spot_is_handed_over_where_cycles_draws_it(world):
     if world == "sky":
         _sky_world(scene)
     else:
-        add_image_world(scene, spot_image(128, 64, SPOT, math.radians(5.0), 100.0))
+        harness.add_image_world(scene, spot_image(128, 64, SPOT, math.radians(5.0), 100.0))
         if world == "rotated image":
             _rotate_lookup(scene, (0.3, -0.2, 1.1))
     (record,) = world_lights.world_records(scene)
@@ -98,7 +98,7 @@ def test_worlds_the_add_on_cannot_read_hand_nothing_over():
     scene = _mirror_scene()
     add_spot_world(scene, 100.0, math.radians(3.0))  # painted with math nodes
     assert world_lights.world_records(scene) == []
-    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(5.0), 100.0))
+    harness.add_image_world(scene, spot_image(64, 32, SPOT, math.radians(5.0), 100.0))
     tree, background = _tree(scene)
     value = tree.nodes.new("ShaderNodeValue")
     tree.links.new(value.outputs[0], background.inputs["Strength"])
@@ -113,7 +113,7 @@ def test_worlds_the_add_on_cannot_read_hand_nothing_over():
 
 def test_a_camera_ray_mix_still_finds_the_lighting_background():
     scene = _mirror_scene()
-    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
+    harness.add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
     tree, background = _tree(scene)
     output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld")
     plain = tree.nodes.new("ShaderNodeBackground")
@@ -129,7 +129,7 @@ def test_a_camera_ray_mix_still_finds_the_lighting_background():
 
 def test_a_render_writes_the_world_spot_into_the_shaders():
     scene = _mirror_scene()
-    add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
+    harness.add_image_world(scene, spot_image(64, 32, SPOT, math.radians(6.0), 100.0))
     assert handover.scene_lamps(scene) == [] and len(handover.scene_records(scene)) == 1
     changed = handover.hand_over(scene)
     assert changed and all(name.startswith("MicrofacetLab_") for name in changed)

@@ -103,6 +103,31 @@ def add_world(scene, env: Environment, light_sampling: bool = True):
     return world
 
 
+def add_image_world(scene, radiance, name="Microfacet Lab image world"):
+    """Set the scene's world to an Environment Texture of the `radiance` image ((H, W) grey or
+    (H, W, 3) RGB, equirectangular), Closest interpolation (each pixel a cell of constant
+    radiance, as the report's reference assumes)."""
+    import bpy
+
+    radiance = np.asarray(radiance, dtype=np.float32)
+    if radiance.ndim == 2:
+        radiance = np.repeat(radiance[..., None], 3, axis=-1)
+    height, width = radiance.shape[:2]
+    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True)
+    rgba = np.concatenate([radiance, np.ones((height, width, 1), np.float32)], axis=-1)
+    image.pixels.foreach_set(rgba.reshape(-1))
+    world = compat.new_node_world(name)
+    tree = world.node_tree
+    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    texture = tree.nodes.new("ShaderNodeTexEnvironment")
+    texture.image = image
+    texture.interpolation = "Closest"
+    tree.links.new(texture.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = 1.0
+    scene.world = world
+    return world
+
+
 def add_camera(scene, layout: GridLayout):
     camera = bpy.data.cameras.new("Microfacet Lab camera")
     camera.type = "ORTHO"

@@ -28,6 +28,14 @@ POINT_RADIUS = 0.1  # m
 LAMP_POSITION = (2.5, -1.0, 2.5)  # the area and point lamps, aimed at Suzanne
 
 
+SKY_HORIZON = (0.55, 0.6, 0.65)  # at the horizon and below
+SKY_ZENITH = (0.12, 0.25, 0.6)  # from SKY_ZENITH_Z up
+SKY_ZENITH_Z = 0.6
+SKY_STRENGTH = 0.6
+HDRI_SIZE = (2048, 1024)  # the HDRI sky's pixels (0.18 degrees each at the horizon)
+HDRI_SUN_ANGLE_DEG = 1.0
+
+
 def add_sky(scene):
     """A sky from nodes: zenith blue to a bright horizon (by the direction's z)."""
     world = harness.compat.new_node_world("Look-dev sky")
@@ -38,17 +46,42 @@ def add_sky(scene):
     sep = tree.nodes.new("ShaderNodeSeparateXYZ")
     ramp = tree.nodes.new("ShaderNodeValToRGB")
     ramp.color_ramp.elements[0].position = 0.0
-    ramp.color_ramp.elements[0].color = (0.55, 0.6, 0.65, 1.0)  # horizon and below
-    ramp.color_ramp.elements[1].position = 0.6
-    ramp.color_ramp.elements[1].color = (0.12, 0.25, 0.6, 1.0)  # zenith
+    ramp.color_ramp.elements[0].color = SKY_HORIZON + (1.0,)
+    ramp.color_ramp.elements[1].position = SKY_ZENITH_Z
+    ramp.color_ramp.elements[1].color = SKY_ZENITH + (1.0,)
     background = tree.nodes.new("ShaderNodeBackground")
-    background.inputs["Strength"].default_value = 0.6
+    background.inputs["Strength"].default_value = SKY_STRENGTH
     out = tree.nodes.new("ShaderNodeOutputWorld")
     tree.links.new(coords.outputs["Generated"], sep.inputs[0])
     tree.links.new(sep.outputs["Z"], ramp.inputs["Fac"])
     tree.links.new(ramp.outputs["Color"], background.inputs["Color"])
     tree.links.new(background.outputs[0], out.inputs["Surface"])
     scene.world = world
+
+
+def hdri_sky_pixels(width: int = HDRI_SIZE[0], height: int = HDRI_SIZE[1],
+                    angle_deg: float = HDRI_SUN_ANGLE_DEG) -> np.ndarray:
+    """(height, width, 3) radiance of an equirectangular HDRI: add_sky's sky, and a sun of
+    `angle_deg` toward SUN_DIRECTION drawn in the pixels whose centre it covers, with the
+    radiance of a sun lamp of SUN_STRENGTH (the irradiance facing it, up to the pixels' edges)."""
+    from ..world_spots import equirect_direction
+
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    d = equirect_direction(u[None, :], v[:, None])
+    t = np.clip(d[..., 2] / SKY_ZENITH_Z, 0.0, 1.0)[..., None]
+    horizon, zenith = np.asarray(SKY_HORIZON), np.asarray(SKY_ZENITH)
+    pixels = SKY_STRENGTH * (horizon + t * (zenith - horizon))
+    sun = np.asarray(SUN_DIRECTION, dtype=float) / np.linalg.norm(SUN_DIRECTION)
+    half = math.radians(angle_deg) / 2.0
+    pixels[d @ sun >= math.cos(half)] = SUN_STRENGTH / (2.0 * math.pi * (1.0 - math.cos(half)))
+    return pixels
+
+
+def add_hdri_sky(scene):
+    """The sky and a 1-degree sun as one HDRI (hdri_sky_pixels; no lamp): the add-on finds
+    the sun in the pixels and hands it over (addon/world_spots.py)."""
+    harness.add_image_world(scene, hdri_sky_pixels(), "Look-dev HDRI sky")
 
 
 def _add_object(scene, name, mesh, location=(0.0, 0.0, 0.0)):

@@ -1,7 +1,8 @@
 """Section "lookdev": samples and time for equal noise against Cycles' closest native closure on
 the look-dev scene (addon/lab/lookdev.py: Suzanne on a floor under the sky, Blender's defaults),
 per preset and light: one lamp beside the sky (a 1-degree sun, the area lamp, a point lamp in
-the area lamp's place) or the sky alone.
+the area lamp's place), the sky alone, or an HDRI of the sky with a 1-degree sun in its pixels
+(no lamp: the add-on hands the sun over as for F12).
 
 - Noise: each material renders at the same sample count with two seeds; the per-pixel variance
   is (a - b)^2 / 2, averaged over Suzanne's pixels and the channels (a mask rendered with
@@ -26,7 +27,7 @@ PAIRS = (("gold", "metallic"), ("gold_cook_torrance", "metallic_beckmann"),
          ("nickel", "metallic_beckmann"), ("rough_gold_lee", "metallic_multiscatter"),
          ("rough_aluminium_lee", "metallic_multiscatter"),
          ("rough_gold_heitz", "metallic_multiscatter"), ("rough_glass_heitz", "glass_multiscatter"))
-LIGHTS = ("sun", "area", "point", "sky")
+LIGHTS = ("sun", "area", "point", "hdri", "sky")
 SUN_ANGLE_DEG = 1.0
 MASK_SAMPLES = 16
 
@@ -44,7 +45,8 @@ def _lamps(light):
     from .. import lookdev
 
     return {"sun": lambda scene: lookdev.add_sun(scene, SUN_ANGLE_DEG), "area": lookdev.add_area,
-            "point": lookdev.add_point, "sky": lambda scene: None}[light]
+            "point": lookdev.add_point, "hdri": lookdev.add_hdri_sky,
+            "sky": lambda scene: None}[light]
 
 
 def _render(make, size, samples, seed, light):
@@ -125,7 +127,7 @@ def page(cfg, rows, res) -> list:
         return []
     lights = list(dict.fromkeys(e["light"] for e in data["entries"]))
     names = {"sun": f"{data['sun_angle_deg']:g}-degree sun", "area": "area lamp",
-             "point": "point lamp", "sky": "sky only"}
+             "point": "point lamp", "hdri": "HDRI with a 1-degree sun", "sky": "sky only"}
     lines = ["## Look-dev: samples for equal noise against Cycles' closest closure", "",
              f"Suzanne on a floor under the sky ({data['size'][0]} x {data['size'][1]} px, "
              f"{data['samples']} samples, Blender's defaults), one light beside the sky. Each "

@@ -12,7 +12,7 @@ from .. import grid, stability
 from ..reference import make_bsdf
 from ..reference.quadrature import tabulate_moments
 from ...catalog import MODELS
-from .config import GOLD
+from .config import GOLD, LAMP_ENVS
 
 
 @dataclass
@@ -43,6 +43,8 @@ VARIANTS = {
     # Lee's V-grooves (catalog defaults: symmetric, gold) beside Cycles' multiscatter GGX gold,
     # a different model, held to a render of itself (SELF_REFERENCE_FACTOR).
     "lee_vgroove": [(MODELS["lee_vgroove"].label, {}, "multi_ggx")],
+    # Heitz 2016 (catalog defaults: GGX gold) beside the same closure, for the same reason.
+    "heitz2016": [(MODELS["heitz2016"].label, {}, "multi_ggx")],
 }
 
 # Variants without a native closure of their own, timed against another variant's.
@@ -60,8 +62,19 @@ NATIVE_TWIN = {
 SELF_REFERENCE_FACTOR = 16
 
 
-def self_referenced(row) -> bool:
-    return row.model_id is None and NATIVE_TWIN[row.native_kind] is None
+def self_referenced(row, env_key: str | None = None) -> bool:
+    """Whether a row is held to a render of itself (SELF_REFERENCE_FACTOR) under `env_key`: a
+    native closure without a numpy twin anywhere; under a lamp (LAMP_ENVS), a model whose numpy
+    evaluation is a Monte Carlo estimate (Heitz 2016's walk), too noisy for the per-pixel
+    quadrature of a lamp. Such a row's error is its noise alone: it measures convergence, not
+    bias (the render tests hold the model to numpy)."""
+    if row.model_id is None:
+        return NATIVE_TWIN[row.native_kind] is None
+    return env_key in LAMP_ENVS and stochastic_eval(row.model_id, row.values)
+
+
+def stochastic_eval(model_id: str, values: dict) -> bool:
+    return bool(getattr(make_bsdf(model_id, values), "stochastic_eval", False))
 
 
 def reference_available(model_id: str) -> str:
@@ -86,16 +99,13 @@ def reference_available(model_id: str) -> str:
 
 
 def eval_is_fast(model_id: str, values: dict, limit: float = 3.0) -> bool:
-    """Whether 20,000 evaluations take under `limit` seconds (the sun term needs millions), and
-    are exact: a walk's evaluation (Heitz 2016) is a Monte Carlo estimate, too noisy for a
-    per-pixel lamp reference, so its rows stay out of the lamp lights. Measured on a 2-core
+    """Whether 20,000 evaluations take under `limit` seconds (the sun term needs millions); a
+    walk's evaluation (Heitz 2016) is a Monte Carlo estimate, held to a render of itself under
+    the lamps instead (`self_referenced`). Measured on a 2-core
     AMD EPYC at roughness 1: Walter and Cook-Torrance under 0.01 s, Lee's symmetric grooves
     0.63 s, asymmetric 1.9 s. (A limit of 0.5 s left Lee's rows out of every lamp light on
     that machine and kept them on a faster one: the limit only guards against a model whose
     lamp reference would take hours.)"""
-
-    if getattr(make_bsdf(model_id, values), "stochastic_eval", False):
-        return False
 
     rng = np.random.default_rng(0)
     wi = np.broadcast_to([0.6, 0.0, 0.8], (20000, 3))
@@ -135,17 +145,17 @@ def build_rows(notes: list) -> list:
     return rows
 
 
-def twin(row: Row) -> tuple:
+def twin(row: Row, env_key: str | None = None) -> tuple:
     """(model id, values) of the numpy model a row is measured against ((None, None): itself)."""
-    if self_referenced(row):
+    if self_referenced(row, env_key):
         return None, None
     return (row.model_id, row.values) if row.model_id else NATIVE_TWIN[row.native_kind]
 
 
-def specs_for(row: Row, roughness) -> list:
+def specs_for(row: Row, roughness, env_key: str | None = None) -> list:
     """SphereSpecs of a row (for natives: the model variant they stand for, for the reference;
-    None for a self-referenced native)."""
-    if self_referenced(row):
+    None for a self-referenced row)."""
+    if self_referenced(row, env_key):
         return [None] * len(roughness)
     if row.model_id is not None:
         return [grid.SphereSpec(row.model_id, {**row.values, "roughness": r}, f"{row.key} r={r}")

@@ -5,7 +5,7 @@ import json
 import math
 import shutil
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +27,16 @@ README_FIGURES = ("rmse_vs_time.png", "sampler_weights.png", "fireflies.png", "f
 
 
 def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
-        sections=SECTIONS) -> dict:
+        sections=SECTIONS, rows=(), envs=()) -> dict:
+    """`rows`: words, of which a convergence row's variant must contain one (all rows if
+    empty); `envs`: the environments run (the mode's if empty)."""
     progress = progress or Progress()
     cfg = config(mode)
+    unknown = set(envs) - set(cfg.envs)
+    if unknown:
+        raise ValueError(f"unknown environments {sorted(unknown)}: {mode} runs {cfg.envs}")
+    if envs:
+        cfg = replace(cfg, envs=tuple(e for e in cfg.envs if e in envs))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -37,7 +44,7 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
     progress(f"mode {mode}: {info['cpu']}, {info['cores']} cores, Blender {info.get('blender')}, "
              f"numpy {info['numpy']}, Python {info['python']}")
     notes = []
-    rows = build_rows(notes)
+    rows = [r for r in build_rows(notes) if not rows or any(w in r.variant for w in rows)]
     for n in notes:
         progress(n)
     tables = ReferenceTables(cfg.moment_order, cfg.walk_moments)

@@ -81,31 +81,6 @@ def add_spot_world(scene, radiance: float, half: float):
     tree.links.new(level.outputs["Value"], background.inputs["Color"])
 
 
-def add_image_world(scene, radiance, name="Microfacet Lab image world"):
-    """Set the scene's world to an Environment Texture of the grey `radiance` (H, W) image,
-    Closest interpolation (each pixel a cell of constant radiance, as the reference assumes)."""
-    import bpy
-
-    from ... import compat
-
-    radiance = np.asarray(radiance, dtype=np.float32)
-    height, width = radiance.shape
-    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True)
-    rgba = np.repeat(radiance[..., None], 4, axis=-1)
-    rgba[..., 3] = 1.0
-    image.pixels.foreach_set(rgba.reshape(-1))
-    world = compat.new_node_world(name)
-    tree = world.node_tree
-    background = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground")
-    texture = tree.nodes.new("ShaderNodeTexEnvironment")
-    texture.image = image
-    texture.interpolation = "Closest"
-    tree.links.new(texture.outputs["Color"], background.inputs["Color"])
-    background.inputs["Strength"].default_value = 1.0
-    scene.world = world
-    return world
-
-
 def calibrate_sun(progress) -> dict:
     """Radiance of the sun lamp as Cycles renders it, read off a mirror sphere (roughness 0,
     F = 1: deterministic, one sample): pixels whose mirror direction lies in the sun's cone
@@ -165,7 +140,7 @@ def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
     if env_key in CONE_LIGHTS and CONE_LIGHTS[env_key][0] == "lamp":
         add_sun(scene, angle_deg=CONE_LIGHTS[env_key][1])
     elif env_key in CONE_LIGHTS and CONE_LIGHTS[env_key][0] == "image":
-        add_image_world(scene, SUN_WORLD + hdri_spot(env_key, sun_cal))
+        harness.add_image_world(scene, SUN_WORLD + hdri_spot(env_key, sun_cal))
     elif env_key in CONE_LIGHTS:
         add_spot_world(scene, *cone_radiance(env_key, sun_cal))
     elif env_key == "point":
