@@ -34,6 +34,9 @@
 #define MFL_CONTROL_MIN_HALF_ANGLE 2e-3
 #define MFL_CONTROL_HORIZON_MARGIN 0.01
 #define MFL_AIM_HELD_SLACK 1e-6
+#define MFL_GUIDE_AMBIENT 1.0
+#define MFL_GUIDE_MIN 0.05
+#define MFL_GUIDE_MAX 0.95
 
 // ---------------------------------------------------------------------------------------
 // The bound of r cos = F D G / (4 wi.n) over a cone of directions wo (axis a, half-angle th).
@@ -277,6 +280,70 @@ color controls_value(vector wo, int count, vector axes[MFL_CONTROL_SLOTS],
             value += weights[j] * cone_density(ths[j]);
     }
     return value;
+}
+
+// ---------------------------------------------------------------------------------------
+// How often to aim (docs/light-sampling.md, "How often to aim").
+
+// The direction of the cone (a, th) nearest to R: R where the cone holds it, else a turned
+// toward R by th.
+vector nearest_in_cone(vector a, float th, vector R)
+{
+    vector perp = R - dot(R, a) * a;
+    float angle = acos(clamp(dot(a, R), -1.0, 1.0));
+    if (angle <= th)
+        return R;
+    if (dot(perp, perp) <= 1e-18)
+        return a;
+    return cos(th) * a + sin(th) * normalize(perp);
+}
+
+// lam, the share of a residual's samples aimed at the lamps (lamps.h), for one shading point:
+// U / (U + A MFL_GUIDE_AMBIENT) within [MFL_GUIDE_MIN, MFL_GUIDE_MAX]. U = sum_j E_j min(u_j,
+// A / Omega_j) guesses the lamps' light that the delta carries: E_j lamp j's rough irradiance
+// (lamp_weight), u_j the residual's r cos less the controls toward the lamp's direction nearest
+// the mirror direction, A / Omega_j the most a lamp wider than the lobe passes (A: the residual's
+// albedo, at most tint (1 - c)); A MFL_GUIDE_AMBIENT guesses the light from everywhere else
+// (an ambient radiance of 1). Aiming where the lobe misses the lamps only starves the rest, and
+// a lamp the controls carry needs no aim. Any lam in (0, 1) keeps the one-sample balance
+// heuristic exact (Veach 1997, sec. 9.2.4): sampling and density use the same (masking, ...:
+// as cone_value_lo; c, exact: the native part's factor and whether its Fresnel is the model's).
+float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, int exact,
+                              vector wi, vector t, vector b, float ax, float ay, float ior,
+                              color n, color k, color tint, int count,
+                              vector axes[MFL_CONTROL_SLOTS], float ths[MFL_CONTROL_SLOTS],
+                              color weights[MFL_CONTROL_SLOTS])
+{
+    float A = (tint[0] * (1.0 - c[0]) + tint[1] * (1.0 - c[1]) + tint[2] * (1.0 - c[2])) / 3.0;
+    float U = 0.0;
+#if MFL_LAMP_COUNT > 0
+    vector R = reflect(-I, N);
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        float E = lamp_weight(i, P, Ng);
+        vector a;
+        float th;
+        if (E <= 0.0 || !lamp_bounding_cone(i, P, a, th))
+            continue;
+        vector d = nearest_in_cone(a, th, R);
+        vector wo = to_local(d, t, b, N);
+        if (wo[2] <= 0.0 || wi[2] <= 0.0)
+            continue;
+        vector m = normalize(wi + wo);
+        color F = fresnel_color(fresnel_type, dot(wi, m), ior, n, k);
+        float g2_hc = (c[0] + c[1] + c[2] > 0.0)
+                          ? G2(MFL_MASKING_HEIGHT_CORRELATED, dist, wi, wo, m, ax, ay) : 0.0;
+        color F_native = exact ? F : color(1.0);
+        color r = (F * G2(masking, dist, wi, wo, m, ax, ay) - c * F_native * g2_hc) *
+                  (D(dist, m, ax, ay) / (4.0 * wi[2]));
+        color v = tint * r - tint * controls_value(d, count, axes, ths, weights);
+        float u = max((v[0] + v[1] + v[2]) / 3.0, 0.0);
+        float omega = 4.0 * MFL_PI * sin(0.5 * th) * sin(0.5 * th);
+        U += E * min(u, A / max(omega, 1e-12));
+    }
+#endif
+    if (U <= 0.0)
+        return MFL_GUIDE_MIN;
+    return clamp(U / (U + A * MFL_GUIDE_AMBIENT), MFL_GUIDE_MIN, MFL_GUIDE_MAX);
 }
 
 #endif  // MFL_CONTROLS_H

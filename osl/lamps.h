@@ -6,11 +6,12 @@
 // there). A shader draws its residual's delta-lobe direction from the mixture
 //   p(wo) = (1 - lam) p_model(wo) + lam sum_j pi_j p_j(wo),
 // p_j uniform over lamp j's solid angle (sun cone, the cone of a sphere lamp) or over its area,
-// pi_j proportional to a rough irradiance of lamp j at P, lam = MFL_GUIDE_FRACTION when some
-// lamp can be aimed at from P (else 0), and weights the sample r cos / p(wo) (Veach 1997, the
-// one-sample balance heuristic). The reflected ray is an ordinary ray: it meets the lamp, or
-// whatever blocks it, and Cycles adds what it finds, so the table only moves noise: a stale or
-// missing lamp never biases, an occluder is never crossed, and no lamp is counted twice.
+// pi_j proportional to a rough irradiance of lamp j at P, lam the shader's guess when some
+// lamp can be aimed at from P (else 0; residual_guide_fraction in controls.h), and weights
+// the sample r cos / p(wo) (Veach 1997, the one-sample balance heuristic). The reflected ray
+// is an ordinary ray: it meets the lamp, or whatever blocks it, and Cycles adds what it finds,
+// so the table only moves noise: a stale or missing lamp never biases, an occluder is never
+// crossed, and no lamp is counted twice.
 #ifndef MFL_LAMPS_H
 #define MFL_LAMPS_H
 
@@ -252,7 +253,8 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 }
 
 // One direction for a reflection residual, from the mixture above when some lamp can be aimed
-// at from P, else from the model's sampler alone. Returns the factor that multiplies the
+// at from P (lam = lam_hint there: residual_guide_fraction in controls.h), else from the
+// model's sampler alone. Returns the factor that multiplies the
 // residual's F G2 - c G2_hc in its sample weight, D(m) / (4 wi.n p(wo)) (with the model's
 // sampler alone this is sample_reflection_factor's closed form), and the half vector m of wi
 // and wo; pdf receives p(wo) where some lamp has weight (else 0). model_share receives
@@ -261,13 +263,13 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 // guided weight itself would undo the aiming: see split_closures).
 // 0 for an invalid sample.
 float sample_guided_residual(int sampler, int dist, vector wi, float ax, float ay, vector t,
-                             vector b, normal n, vector key, output vector m,
+                             vector b, normal n, vector key, float lam_hint, output vector m,
                              output vector wo, output float model_share, output float pdf)
 {
     model_share = 1.0;
     pdf = 0.0;
     float total;
-    float lam = guide_fraction(P, n, total);
+    float lam = (guide_fraction(P, n, total) > 0.0) ? lam_hint : 0.0;
     if (lam <= 0.0 || rng(key, 6) >= lam) {
         float factor = sample_reflection_factor(sampler, dist, wi, ax, ay, key, m);
         wo = reflect_about(wi, m);

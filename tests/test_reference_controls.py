@@ -141,9 +141,10 @@ def test_residual_and_controls_sum_to_the_residual(case):
     # Before the clamp: the controls stay below the residual at every sampled direction.
     assert np.all(controls.controls_value(terms, wo_p) <= _residual_cos(bsdf, WI, wo_p) + 1e-12)
     for rec, (_, th_k, w_k, _) in zip(records, terms):
-        inside = (lamps.lamp_pdf(rec, P0, wo_c) > 0)[..., None]
-        m_c, e_c = _mean_and_error(w_c * inside)
-        m_p, e_p = _mean_and_error(w_p * inside)
+        # Each sampler's own directions: the two aim at different rates (the controls' sampler
+        # as residual_guide_fraction says), so their samples differ.
+        m_c, e_c = _mean_and_error(w_c * (lamps.lamp_pdf(rec, P0, wo_c) > 0)[..., None])
+        m_p, e_p = _mean_and_error(w_p * (lamps.lamp_pdf(rec, P0, wo_p) > 0)[..., None])
         # The toon's integral over the lamp's cone: 1, or the solid-angle ratio where the
         # control's cone was widened around it.
         th = controls.lamp_bounding_cone(rec, P0)[1]
@@ -196,6 +197,41 @@ def test_osl_constants_are_the_numpy_ones():
                         ("GROW_CAP", controls.GROW_CAP), ("GROW_MAX", controls.GROW_MAX)):
         assert osl_text.define_float(src, f"MFL_CONTROL_{name}") == value, name
     assert osl_text.define_float(src, "MFL_AIM_HELD_SLACK") == controls.AIM_HELD_SLACK
+    for name, value in (("AMBIENT", controls.GUIDE_AMBIENT), ("MIN", controls.GUIDE_MIN),
+                        ("MAX", controls.GUIDE_MAX)):
+        assert osl_text.define_float(src, f"MFL_GUIDE_{name}") == value, name
+
+
+def test_nearest_in_cone_is_the_cone_point_nearest_the_direction():
+    axis = np.array([0.0, 0.0, 1.0])
+    inside = np.array([math.sin(0.1), 0.0, math.cos(0.1)])
+    assert np.allclose(controls.nearest_in_cone(axis, 0.2, inside), inside)
+    far = np.array([0.0, math.sin(1.0), math.cos(1.0)])
+    got = controls.nearest_in_cone(axis, 0.2, far)
+    assert np.allclose(got, [0.0, math.sin(0.2), math.cos(0.2)])
+    dense = [controls.nearest_in_cone(axis, 0.2, d) for d in (far, -far)]
+    assert all(abs(np.linalg.norm(d) - 1.0) < 1e-12 for d in dense)
+
+
+def test_guide_fraction_aims_where_the_lobe_meets_an_uncarried_lamp():
+    """residual_guide_fraction: GUIDE_MAX toward a bright lamp at the mirror direction with no
+    controls, GUIDE_MIN where the lobe misses every lamp, and less where the controls carry the
+    lamp than where they do not. What it would catch: a guess that aims where the lobe cannot
+    use it (a starved rest of the lobe) or never aims at a lamp the delta must find."""
+    bsdf = make_bsdf(*CASES[5])  # Cook-Torrance gold, roughness default
+    mirror = WI * np.array([-1.0, -1.0, 1.0])
+    at_mirror = records_mod.sun_record(tuple(mirror), math.radians(1.0), 100.0)
+    behind = records_mod.sun_record((-0.9, 0.4, 0.15), math.radians(1.0), 100.0)
+    P, wi = P0[None], WI[None]
+    lam = controls.residual_guide_fraction(bsdf, [at_mirror], P, wi, [])
+    assert lam[0] == pytest.approx(controls.GUIDE_MAX)
+    lam = controls.residual_guide_fraction(bsdf, [behind], P, wi, [])
+    assert lam[0] == pytest.approx(controls.GUIDE_MIN)
+    dim = records_mod.sun_record(tuple(mirror), math.radians(4.0), 0.5)
+    free = controls.residual_guide_fraction(bsdf, [dim], P, wi, [])
+    carried = controls.residual_guide_fraction(
+        bsdf, [dim], P, wi, controls.control_terms(bsdf, [dim], P, wi))
+    assert controls.GUIDE_MIN <= carried[0] < free[0] < controls.GUIDE_MAX
 
 
 # --- Lee's V-grooves (symmetric): controls on the first bounce, the first bounces aimed ---------

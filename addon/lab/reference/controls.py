@@ -25,7 +25,7 @@ import numpy as np
 
 from .lamps import cone_density, extents, lamp_cone, lamp_weight, sample_guided_residual
 from .microfacet import Microfacet, dot, normalize
-from .split import conductor_min, supports_split
+from .split import conductor_min, eval_residual, native_factor, supports_split
 
 # osl/controls.h MFL_CONTROL_*: at most this many controls per shading point; a control whose mean
 # weight is below MIN_WEIGHT is widened or left out (Cycles drops closures below 1e-5, so a
@@ -43,6 +43,11 @@ GROW_MAX = 0.1
 MIN_HALF_ANGLE = 2e-3
 HORIZON_MARGIN = 0.01
 AIM_HELD_SLACK = 1e-6  # cos slack of add_aim_cones' test of a lamp inside a cone (its own)
+# osl/controls.h MFL_GUIDE_*: residual_guide_fraction's guess of the ambient radiance, and the
+# range of the share of samples it aims at the lamps.
+GUIDE_AMBIENT = 1.0
+GUIDE_MIN = 0.05
+GUIDE_MAX = 0.95
 
 
 def cone_half_vectors(wi, axis, th):
@@ -245,10 +250,51 @@ def controls_value(terms, wo):
     return value
 
 
+def nearest_in_cone(axis, th, R):
+    """The direction of the cone (axis, th) nearest to R (..., 3): R where the cone holds it,
+    else the axis turned toward R by th (osl nearest_in_cone)."""
+    axis, R = np.broadcast_arrays(np.asarray(axis, dtype=float), np.asarray(R, dtype=float))
+    th = np.broadcast_to(np.asarray(th, dtype=float), axis.shape[:-1])[..., None]
+    perp = R - dot(R, axis)[..., None] * axis
+    length = np.linalg.norm(perp, axis=-1, keepdims=True)
+    turned = np.cos(th) * axis + np.sin(th) * perp / np.maximum(length, 1e-300)
+    angle = np.arccos(np.clip(dot(axis, R), -1.0, 1.0))[..., None]
+    return np.where(angle <= th, R, np.where(length ** 2 <= 1e-18, axis, turned))
+
+
+def residual_guide_fraction(bsdf, records, P, wi, terms, Ng=(0.0, 0.0, 1.0)):
+    """lam (...,): the share of the residual's samples aimed at the lamps at P for wi (osl
+    residual_guide_fraction), U / (U + A GUIDE_AMBIENT) within [GUIDE_MIN, GUIDE_MAX]:
+    U = sum_j E_j min(u_j, A / Omega_j), E_j lamp j's guiding weight, u_j the residual's
+    r cos less the controls (terms) toward the direction of the lamp's bounding cone nearest
+    the mirror direction, A = tint (1 - c) the residual's albedo bound. A guess: any lam keeps
+    the one-sample balance heuristic exact."""
+    P, wi = np.broadcast_arrays(np.asarray(P, dtype=float), np.asarray(wi, dtype=float))
+    Ng = np.broadcast_to(np.asarray(Ng, dtype=float), P.shape)
+    A = np.mean(bsdf.tint * (1.0 - native_factor(bsdf, wi)), axis=-1)
+    mirror = wi * np.array([-1.0, -1.0, 1.0])
+    U = np.zeros(P.shape[:-1])
+    for rec in records:
+        E = lamp_weight(rec, P, Ng)
+        axis, th, valid = lamp_bounding_cone(rec, P)
+        d = nearest_in_cone(axis, th, mirror)
+        r_cos = eval_residual(bsdf, wi, d) * np.maximum(d[..., 2], 0.0)[..., None]
+        u = np.maximum(np.mean(r_cos - controls_value(terms, d), axis=-1), 0.0)
+        omega = 4.0 * math.pi * np.sin(0.5 * th) ** 2
+        ok = valid & (E > 0.0) & (d[..., 2] > 0.0) & (wi[..., 2] > 0.0)
+        U = U + np.where(ok, E * np.minimum(u, A / np.maximum(omega, 1e-12)), 0.0)
+    lam = np.clip(U / np.where(U > 0.0, U + A * GUIDE_AMBIENT, 1.0), GUIDE_MIN, GUIDE_MAX)
+    return np.where(U > 0.0, lam, GUIDE_MIN)
+
+
 def guided_residual_beside_controls(bsdf, records, P, wi, u):
-    """lamps.sample_guided_residual less what the lamp controls carry: the residual as the
-    shaders return it beside them (osl sample_guided_residual with controls)."""
+    """lamps.sample_guided_residual less what the lamp controls carry, aiming as often as
+    residual_guide_fraction says: the residual as the shaders return it beside them (osl
+    sample_guided_residual with controls)."""
+    Ng = np.broadcast_to([0.0, 0.0, 1.0], np.broadcast_shapes(np.shape(P), np.shape(wi)))
+    lam = residual_guide_fraction(bsdf, records, P, wi, control_terms(bsdf, records, P, wi, Ng))
+
     def less(P, wi, Ng, wo):
         return controls_value(control_terms(bsdf, records, P, wi, Ng), wo)
-    return sample_guided_residual(bsdf, records, P, wi, u, less=less)
+    return sample_guided_residual(bsdf, records, P, wi, u, less=less, lam=lam)
 

@@ -189,19 +189,20 @@ def sample_lamps(records, P, Ng, u0, u1, u2):
     return out
 
 
-def sample_guided_residual(bsdf, records, P, wi, u, less=None):
+def sample_guided_residual(bsdf, records, P, wi, u, less=None, lam=None):
     """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
     r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
     sample_guided_residual). u: (..., 7) uniforms: 3 for the model's sampler, the choice
     between lamps and model, the lamp, and 2 for the lamp's direction. less(P, wi, Ng, wo):
     what to take off r cos (controls.guided_residual_beside_controls: the lamp controls'
-    part)."""
+    part); lam (...,): the share aimed where some lamp has weight (default GUIDE_FRACTION)."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     shape = np.broadcast_shapes(P.shape, wi.shape, u.shape[:-1] + (3,))
     P, wi = np.broadcast_to(P, shape), np.broadcast_to(wi, shape)
     u = np.broadcast_to(u, shape[:-1] + (7,))
     Ng = np.broadcast_to([0.0, 0.0, 1.0], shape)
-    lam, _ = guide_fraction(records, P, Ng)
+    default, total = guide_fraction(records, P, Ng)
+    lam = default if lam is None else np.where(total > 0.0, lam, 0.0)
     m_model, _ = bsdf.sample_normal(wi, u[..., :3])
     wo = reflect_about(wi, m_model)
     if records:

@@ -18,7 +18,7 @@ from .symmetric import eval
 
 # -- Native + Residual (osl/lee_vgroove.osl, docs/light-sampling.md "Lee") -----------------------
 # The bounce terms aimed into the lamps' cones (osl LEE_AIMED_ORDERS).
-AIMED_ORDERS = 6
+AIMED_ORDERS = 16
 # Uniforms of one Native + Residual sample: 0-5 the sampler (3-5: an asymmetric groove's
 # partner), 6 the branch, 7-9 the cone, then (asymmetric grooves) one per frame, k and side of
 # the aimed terms' Monte Carlo rule (eval_asymmetric's u; osl LEE_PARTNER_DIM).
@@ -102,22 +102,27 @@ def sample_light_sampled(bsdf: LeeBRDF, records, P, wi, u):
     """One sample of the Native + Residual estimator (the twin of lee_vgroove.osl): (wo, weight
     RGB of the delta lobe, tint included, terms: the controls as controls.control_terms gives
     them, which ride on every sample). With A the chosen cones (each lamp's, widened where it
-    has a control; aimed_cones) and lam = GUIDE_FRACTION where there are any: with probability
-    lam a direction in one of them (each with probability 1 / count; uniform in it, or where a
-    control widened it, half the time uniform in the lamp's own cone: cones_pdf), weighted by
-    (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p + (1 - lam) q) (low_orders; q = mis_density);
-    otherwise a path of the sampler over 1 - lam, its exit where k <= AIMED_ORDERS and wo lies
-    in A times the balance heuristic's share (1 - lam) q / (lam p + (1 - lam) q) and, beside
-    controls, 1 - sum w t / (f_{k<=AIMED_ORDERS} cos) (exact for any q: the two weights sum to 1
-    at every direction, Veach 1997 sec. 9.2). u: (...,
-    uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
+    has a control; aimed_cones) and, where there are any, lam = max(GUIDE_FRACTION,
+    controls.residual_guide_fraction) (the first bounce standing for the residual): with
+    probability lam a direction in one of them (each with probability 1 / count; uniform in it,
+    or where a control widened it, half the time uniform in the lamp's own cone: cones_pdf),
+    weighted by (f_{k<=AIMED_ORDERS} cos - sum w t) / (lam p + (1 - lam) q) (low_orders;
+    q = mis_density); otherwise a path of the sampler over 1 - lam, its exit where
+    k <= AIMED_ORDERS and wo lies in A times the balance heuristic's share
+    (1 - lam) q / (lam p + (1 - lam) q) and, beside controls, 1 - sum w t / (f_{k<=AIMED_ORDERS}
+    cos) (exact for any q: the two weights sum to 1 at every direction, Veach 1997 sec. 9.2).
+    u: (..., uniforms_needed(groove)) uniforms, laid out as PARTNER_DIM says."""
     P, wi, u = (np.asarray(x, dtype=float) for x in (P, wi, u))
     n = wi.shape[0]
     terms = aimed_cones(bsdf, records, P, wi)
     valid = np.stack([v for *_, v, _ in terms], -1) if terms else np.zeros((n, 0), bool)
     count = valid.sum(-1)
     # The OSL keeps the valid cones first, in table order: the j-th valid one is slot j.
-    lam = np.where(count > 0, GUIDE_FRACTION, 0.0)
+    # How often to aim: at least GUIDE_FRACTION, more where the first bounce (the V-cavity
+    # term, standing for the aimed terms) says so (controls.residual_guide_fraction).
+    guess = controls.residual_guide_fraction(first_order(bsdf), records, P, wi,
+                                             [t[:4] for t in terms])
+    lam = np.where(count > 0, np.maximum(GUIDE_FRACTION, guess), 0.0)
     wo_s, w_s, k_s = bsdf.sample(wi, u[..., :6])
     wo = wo_s.copy()
     aimed = u[:, 6] < lam
