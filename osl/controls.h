@@ -329,12 +329,8 @@ float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, 
         if (wo[2] <= 0.0 || wi[2] <= 0.0)
             continue;
         vector m = normalize(wi + wo);
-        color F = fresnel_color(fresnel_type, dot(wi, m), ior, n, k);
-        float g2_hc = (c[0] + c[1] + c[2] > 0.0)
-                          ? G2(MFL_MASKING_HEIGHT_CORRELATED, dist, wi, wo, m, ax, ay) : 0.0;
-        color F_native = exact ? F : color(1.0);
-        color r = (F * G2(masking, dist, wi, wo, m, ax, ay) - c * F_native * g2_hc) *
-                  (D(dist, m, ax, ay) / (4.0 * wi[2]));
+        color r = residual_factor(masking, dist, fresnel_type, c, exact, wi, wo, m, ax, ay, ior,
+                                  n, k) * (D(dist, m, ax, ay) / (4.0 * wi[2]));
         color v = tint * r - tint * controls_value(d, count, axes, ths, weights);
         float u = max((v[0] + v[1] + v[2]) / 3.0, 0.0);
         float omega = 4.0 * MFL_PI * sin(0.5 * th) * sin(0.5 * th);

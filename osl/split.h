@@ -108,6 +108,18 @@ float native_factor(int masking, int dist, vector wi, float ax, float ay)
     return (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
 }
 
+// The residual's value per unit of D / (4 wi.n), without the tint: F G2 - c F_n G2_hc, where
+// F_n = F if the native part carries the model's Fresnel (exact), else 1 (Blender 4.x: c holds
+// a Fresnel bound). Not clamped: a caller subtracts the controls first.
+color residual_factor(int masking, int dist, int fresnel_type, color c, int exact, vector wi,
+                      vector wo, vector m, float ax, float ay, float ior, color n, color k)
+{
+    color F = fresnel_color(fresnel_type, dot(wi, m), ior, n, k);
+    float g2_hc = (c[0] + c[1] + c[2] > 0.0)
+                      ? G2(MFL_MASKING_HEIGHT_CORRELATED, dist, wi, wo, m, ax, ay) : 0.0;
+    return F * G2(masking, dist, wi, wo, m, ax, ay) - c * (exact ? F : color(1.0)) * g2_hc;
+}
+
 // Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own
 // Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf with no
 // transmission for a dielectric (the same closed forms; tests/test_reference_split.py),

@@ -40,6 +40,10 @@ OSL_ONLY = {
     ("bsdf.h", "sample_reflection"):
         "G2 times sample_reflection_factor, the stochastic branch's weight; numpy: "
         "MicrofacetBRDF.sample, which also applies F and the tint",
+    ("split.h", "residual_factor"):
+        "F G2 - c F_n G2_hc, the residual per unit of D / (4 wi.n); numpy: "
+        "split.residual_weight_reflection, which also applies the sampler's factor, the tint "
+        "and the clamp, and eval_residual",
     ("lamps.h", "lamp_vector"): "reads the generated lamp table; numpy reads LampRecord fields",
     ("lamps.h", "lamp_kind"): "reads the generated lamp table; numpy reads LampRecord.kind",
     ("lamps.h", "lamp_u"): "reads an area lamp's enlarged axis from the table; numpy: extents",

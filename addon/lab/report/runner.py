@@ -30,6 +30,7 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
         sections=SECTIONS, rows=(), envs=()) -> dict:
     """`rows`: words, of which a convergence row's variant must contain one (all rows if
     empty); `envs`: the environments run (the mode's if empty)."""
+    words = tuple(rows)
     progress = progress or Progress()
     cfg = config(mode)
     unknown = set(envs) - set(cfg.envs)
@@ -44,7 +45,7 @@ def run(mode: str = "full", out_dir="report", figures_dir=None, progress=None,
     progress(f"mode {mode}: {info['cpu']}, {info['cores']} cores, Blender {info.get('blender')}, "
              f"numpy {info['numpy']}, Python {info['python']}")
     notes = []
-    rows = [r for r in build_rows(notes) if not rows or any(w in r.variant for w in rows)]
+    rows = [r for r in build_rows(notes) if not words or any(w in r.variant for w in words)]
     for n in notes:
         progress(n)
     tables = ReferenceTables(cfg.moment_order, cfg.walk_moments)
