@@ -62,10 +62,18 @@ def aimed_cones(bsdf: LeeBRDF, records, P, wi):
 def mis_density(bsdf: LeeBRDF, wi, wo):
     """osl lee_mis_density: the density the balance heuristic between the aimed cones and the
     sampler uses for the sampler, whose exits' density has no closed form: the first order's
-    visible-normal density (any density used in both weights keeps the estimate exact)."""
+    visible-normal density q_1 times f_{k<=AIMED_ORDERS} / f_1 of symmetric grooves (closed
+    form, colour means). Near the mirror direction the terms k >= 2 grow as 1 / d (d the
+    distance to it: the grooves' azimuths fold their exits there), so an aimed direction over
+    q_1 alone had an unbounded weight; the sampler's own exits follow that spike, and so does
+    this q. Asymmetric grooves use it too (their spike is at most about 1.1 times this one).
+    Any density used in both weights keeps the estimate exact."""
     h = wi + wo
     h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
-    return reflection_pdf(first_order(bsdf), wi, h)
+    q1 = reflection_pdf(first_order(bsdf), wi, h)
+    f1 = eval(wi, wo, bsdf.mf, bsdf.fresnel_table, 1, bsdf.kmax).mean(-1)
+    fk = eval(wi, wo, bsdf.mf, bsdf.fresnel_table, AIMED_ORDERS, bsdf.kmax).mean(-1)
+    return np.where(f1 > 0.0, q1 * np.maximum(fk, f1) / np.where(f1 > 0.0, f1, 1.0), q1)
 
 
 def cones_pdf(terms, wo):
