@@ -33,7 +33,6 @@
 #define MFL_CONTROL_GROW_MAX 0.1
 #define MFL_CONTROL_MIN_HALF_ANGLE 2e-3
 #define MFL_CONTROL_HORIZON_MARGIN 0.01
-#define MFL_AIM_HELD_SLACK 1e-6
 #define MFL_GUIDE_AMBIENT 1.0
 #define MFL_GUIDE_MIN 0.05
 #define MFL_GUIDE_MAX 0.95
@@ -173,40 +172,6 @@ int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_S
     }
 #endif
     return count;
-}
-
-// The lamps with weight at P that no chosen cone holds (one too near a horizon for a control,
-// or left out for overlap), appended after the count chosen cones with no weight, up to
-// MFL_CONTROL_SLOTS: a residual aimed only into cones (Lee) then aims at every such lamp; the
-// cones may overlap, as the aiming density sums them. Returns the new count. Without it a small
-// lamp on the horizon of a smooth-shaded face was found by chance only (rough Lee gold under the
-// look-dev point lamp: single samples 1,000 times a pixel's mean).
-int add_aim_cones(point P, normal Ns, int count, output vector axes[MFL_CONTROL_SLOTS],
-                  output float ths[MFL_CONTROL_SLOTS], output float lamp_ths[MFL_CONTROL_SLOTS],
-                  output color weights[MFL_CONTROL_SLOTS])
-{
-    int n = count;
-#if MFL_LAMP_COUNT > 0
-    for (int i = 0; i < MFL_LAMP_COUNT && n < MFL_CONTROL_SLOTS; i++) {
-        vector a;
-        float th;
-        if (lamp_weight(i, P, Ns) <= 0.0 || !lamp_bounding_cone(i, P, a, th) ||
-            th >= 0.5 * MFL_PI)
-            continue;
-        int held = 0;  // within a cone already (the lamp's own control cone, rounding aside)
-        for (int j = 0; j < n; j++)
-            if (dot(a, axes[j]) >= cos(max(ths[j] - th, 0.0)) - MFL_AIM_HELD_SLACK)
-                held = 1;
-        if (held)
-            continue;
-        axes[n] = a;
-        ths[n] = max(th, MFL_CONTROL_MIN_HALF_ANGLE);
-        lamp_ths[n] = ths[n];
-        weights[n] = color(0.0);
-        n += 1;
-    }
-#endif
-    return n;
 }
 
 // w_K without the tint: 2 pi (1 - cos th) cone_value_lo (1 - margin).

@@ -174,21 +174,6 @@ def test_cones_that_reach_the_horizon_or_overlap_are_left_out():
     assert [bool(v[0]) for _, _, v in chosen] == [False, True, False]
 
 
-def test_lamps_without_a_control_still_get_an_aim_cone():
-    """add_aim_cones (Lee aims into cones only): the lamp on the horizon and the one overlapping
-    a chosen cone, both left without a control, get a cone to aim at, with no weight; the chosen
-    lamp is not added twice. Without it a small lamp on the horizon of a smooth-shaded face was
-    found by chance (rough Lee gold under the look-dev point lamp: 7 times the variance)."""
-    low = records_mod.sun_record((1.0, 0.0, 0.02), math.radians(4.0), 1.0)
-    twin = records_mod.sun_record((0.4, -0.2, 0.9), math.radians(4.0), 1.0)
-    P, Ng = P0[None], np.array([[0.0, 0.0, 1.0]])
-    chosen = controls.select_cones([low, SUN, twin], P, Ng)
-    cones = controls.add_aim_cones([low, SUN, twin], P, Ng, chosen)
-    assert [bool(v[0]) for _, _, v in cones] == [False, True, False, True, False, True]
-    full = controls.add_aim_cones([low, SUN, twin], P, Ng, chosen * 4)  # four slots taken
-    assert not any(bool(v[0]) for _, _, v in full[12:])
-
-
 def test_osl_constants_are_the_numpy_ones():
     src = osl_text.source("controls.h")
     for name, value in (("SLOTS", controls.CONTROL_SLOTS), ("MIN_WEIGHT", controls.MIN_WEIGHT),
@@ -196,7 +181,6 @@ def test_osl_constants_are_the_numpy_ones():
                         ("HORIZON_MARGIN", controls.HORIZON_MARGIN),
                         ("GROW_CAP", controls.GROW_CAP), ("GROW_MAX", controls.GROW_MAX)):
         assert osl_text.define_float(src, f"MFL_CONTROL_{name}") == value, name
-    assert osl_text.define_float(src, "MFL_AIM_HELD_SLACK") == controls.AIM_HELD_SLACK
     for name, value in (("AMBIENT", controls.GUIDE_AMBIENT), ("MIN", controls.GUIDE_MIN),
                         ("MAX", controls.GUIDE_MAX)):
         assert osl_text.define_float(src, f"MFL_GUIDE_{name}") == value, name
@@ -291,3 +275,61 @@ def test_lee_native_and_residual_is_the_model(groove):
     wo_s, w_s, _ = bsdf.sample(wi, u[:, :6])
     lit = lambda d, x: (x * (lamps.lamp_pdf(SUN, P0, d) > 0)[..., None]).sum(-1)  # noqa: E731
     assert np.mean(lit(wo_s, w_s) ** 2) > 10 * np.mean(lit(wo, w) ** 2)
+
+
+def _rect_around(direction, distance, half, offset):
+    """An area record of half-extent `half`, facing P0, centred `distance` along `direction`
+    turned by `offset` (a vector added before normalising)."""
+    axis = normalize_rows(np.asarray(direction, float) + offset)
+    u = normalize_rows(np.cross(axis, [0.0, 0.0, 1.0]))
+    v = np.cross(axis, u)
+    return records_mod.area_record("SQUARE", tuple(distance * axis), tuple(-axis),
+                                   tuple(half * u), tuple(half * v), 400.0)
+
+
+def test_lee_aims_at_the_lamps_and_about_the_mirror_direction():
+    """lee.sample_light_sampled's aimed directions (sample_aimed): a rectangle over its area, a
+    lamp on the horizon that has no control, and, where the mirror direction meets a lamp,
+    about it (the 1 / theta spike of the terms k >= 2: mis_density, sample_spike). Still the
+    model: the mean plus the controls is the plain sampler's albedo, and inside each lamp the
+    model's integral over it, within 5 sigma. What this catches: a spike or area density that
+    is not the one sampled (a bias); aiming into the rectangle's bounding cone (32% of these
+    samples met the rectangle, 66% now); the unbounded weight of a direction near the mirror
+    (the grooves' terms grow as 1 / d there). Measured here, the rectangle-lit variance and
+    largest weight: 0.143 and 103 with the first order's density as the stand-in and aiming
+    into cones, 0.044 and 2.9 with mis_density, 0.0087 and 0.64 now."""
+    from addon.lab.reference import lee
+
+    bsdf = make_bsdf("lee_vgroove", {"roughness": 0.7, "groove": "symmetric"})
+    mirror = WI * np.array([-1.0, -1.0, 1.0])
+    rect = _rect_around(mirror, 2.3, 0.75, np.array([0.05, 0.1, 0.0]))
+    low = records_mod.sun_record((1.0, 0.0, 0.02), math.radians(4.0), 1.0)
+    records = [rect, low]
+    n = 200_000
+    u = np.random.default_rng(41).random((n, lee.uniforms_needed("symmetric")))
+    P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
+    assert lee.light_sampling.spike_angle(records, P0[None], np.array([[0.0, 0.0, 1.0]]),
+                                          mirror[None])[0] > 0.0
+    wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
+    assert np.all(w >= 0.0)
+    _, w_plain, _ = bsdf.sample(wi, np.random.default_rng(42).random((n, 6)))
+    m, e = _mean_and_error(w)
+    m_p, e_p = _mean_and_error(w_plain)
+    carried_all = sum(w_k[0] for _, _, w_k, _ in terms)
+    assert np.all(np.abs(m + carried_all - m_p) <= 5 * np.hypot(e, e_p)), (m, carried_all, m_p)
+    rng = np.random.default_rng(43)
+    for rec, (axis, th_k, w_k, _) in zip(records, terms):
+        inside = lamps.lamp_pdf(rec, P0, wo) > 0
+        assert inside.mean() > (0.5 if rec is rect else 0.005)  # the lamp on the horizon too
+        if rec is rect:
+            assert float(w.mean(-1)[inside].max()) < 1.0
+        m_c, e_c = _mean_and_error(w * inside[..., None])
+        # the control's part inside the lamp: its cone's share that the lamp covers
+        d = lamps.sample_cone(np.broadcast_to(axis[0], (n, 3)),
+                              np.full(n, 2.0 * math.sin(0.5 * th_k[0]) ** 2), rng.random(n),
+                              rng.random(n))
+        carried = w_k[0] * np.mean(lamps.lamp_pdf(rec, P0, d) > 0)
+        wl = lamps.sample_lamp(rec, P, rng.random(n), rng.random(n))
+        f = bsdf.eval(wi, wl) * wl[:, 2:3] / lamps.lamp_pdf(rec, P0, wl)[:, None]
+        m_l, e_l = _mean_and_error(f)
+        assert np.all(np.abs(m_c + carried - m_l) <= 5 * np.hypot(e_c, e_l)), (m_c, carried, m_l)

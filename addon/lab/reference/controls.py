@@ -42,7 +42,6 @@ GROW_CAP = 0.5
 GROW_MAX = 0.1
 MIN_HALF_ANGLE = 2e-3
 HORIZON_MARGIN = 0.01
-AIM_HELD_SLACK = 1e-6  # cos slack of add_aim_cones' test of a lamp inside a cone (its own)
 # osl/controls.h MFL_GUIDE_*: residual_guide_fraction's guess of the ambient radiance, and the
 # range of the share of samples it aims at the lamps.
 GUIDE_AMBIENT = 1.0
@@ -202,28 +201,6 @@ def select_cones(records, P, Ng):
         chosen.append((axis, th, valid))
         running = running + valid
     return chosen
-
-
-def add_aim_cones(records, P, Ng, cones):
-    """osl add_aim_cones: `cones` [(axis, th, valid)] (the chosen ones, th their control's cone)
-    followed by one per record for the lamps with weight at P that no cone before holds (the
-    lamp's cone within it, up to AIM_HELD_SLACK in cos), with no control, while fewer than
-    CONTROL_SLOTS are valid per point (table order)."""
-    P = np.asarray(P, dtype=float)
-    out = list(cones)
-    running = np.zeros(P.shape[:-1], dtype=int)
-    for _, _, v in cones:
-        running = running + v
-    for rec in records:
-        axis, th, valid = lamp_bounding_cone(rec, P)
-        valid = valid & (running < CONTROL_SLOTS) & (lamp_weight(rec, P, Ng) > 0.0)
-        valid &= th < 0.5 * math.pi
-        for a2, th2, v2 in out:
-            held = dot(axis, a2) >= np.cos(np.maximum(th2 - th, 0.0)) - AIM_HELD_SLACK
-            valid &= ~(held & v2)
-        out.append((axis, np.maximum(th, MIN_HALF_ANGLE), valid))
-        running = running + valid
-    return out
 
 
 def control_terms(bsdf, records, P, wi, Ng=(0.0, 0.0, 1.0)):

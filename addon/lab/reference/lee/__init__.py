@@ -34,7 +34,7 @@ from .fresnel_table import FresnelTable
 from .geometry import (BECKMANN_Y_MAX, PI, TRUNCATION, bounce_count, bounce_count_symmetric,
                        exit_angle, fresnel_product, kmax_for, max_bounces, max_bounces_closed_form,
                        tail_ratio)
-from .light_sampling import (AIMED_ORDERS, PARTNER_DIM, aimed_cones, first_order, low_orders,
+from .light_sampling import (AIMED_ORDERS, PARTNER_DIM, control_cones, first_order, low_orders,
                              sample_light_sampled, uniforms_needed)
 from .model import LeeBRDF
 from .sampler import local_angles, sample, sample_albedo, sample_partner
@@ -47,5 +47,5 @@ __all__ = [
     "bounce_count_symmetric", "bounce_count", "exit_angle", "fresnel_product",
     "local_angles", "sample_partner", "sample", "sample_albedo",
     "G_k_symmetric", "eval", "partner_norm", "eval_asymmetric", "albedo", "moments",
-    "uniforms_needed", "first_order", "aimed_cones", "low_orders", "sample_light_sampled",
+    "uniforms_needed", "first_order", "control_cones", "low_orders", "sample_light_sampled",
 ]
