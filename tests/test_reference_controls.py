@@ -239,6 +239,24 @@ def normalize_rows(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def _lee_sample_holds_the_albedo(bsdf, records, n, seed):
+    """n samples of lee.sample_light_sampled at P0 for WI: (P, wi, wo, w, terms, u), checking
+    that every weight is non-negative and that their mean plus the controls is the plain
+    sampler's albedo, within 5 sigma."""
+    from addon.lab.reference import lee
+
+    u = np.random.default_rng(seed).random((n, lee.uniforms_needed(bsdf.groove)))
+    P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
+    wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
+    assert np.all(w >= 0.0)
+    _, w_plain, _ = bsdf.sample(wi, np.random.default_rng(seed + 1).random((n, 6)))
+    m, e = _mean_and_error(w)
+    m_p, e_p = _mean_and_error(w_plain)
+    carried_all = sum(w_k[0] for _, _, w_k, _ in terms)
+    assert np.all(np.abs(m + carried_all - m_p) <= 5 * np.hypot(e, e_p)), (m, carried_all, m_p)
+    return P, wi, wo, w, terms, u
+
+
 @pytest.mark.parametrize("groove", ("symmetric", "asymmetric"))
 def test_lee_native_and_residual_is_the_model(groove):
     """lee.sample_light_sampled (twin of lee_vgroove.osl): its mean plus the controls is the
@@ -253,15 +271,7 @@ def test_lee_native_and_residual_is_the_model(groove):
     # Asymmetric grooves: every lamp check evaluates the partner-wall quadrature (43 s at 60,000
     # samples); 20,000 keep the 5-sigma checks and the second moment's margin (28 against 10).
     n = 60_000 if groove == "symmetric" else 20_000
-    u = np.random.default_rng(23).random((n, lee.uniforms_needed(groove)))
-    P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
-    wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
-    assert np.all(w >= 0.0)
-    _, w_plain, _ = bsdf.sample(wi, np.random.default_rng(24).random((n, 6)))
-    m, e = _mean_and_error(w)
-    m_p, e_p = _mean_and_error(w_plain)
-    carried_all = sum(w_k[0] for _, _, w_k, _ in terms)
-    assert np.all(np.abs(m + carried_all - m_p) <= 5 * np.hypot(e, e_p)), (m, carried_all, m_p)
+    P, wi, wo, w, terms, u = _lee_sample_holds_the_albedo(bsdf, records, n, 23)
     for i, (rec, (_, th_k, w_k, _)) in enumerate(zip(records, terms)):
         inside = (lamps.lamp_pdf(rec, P0, wo) > 0)[..., None]
         m_c, e_c = _mean_and_error(w * inside)
@@ -306,17 +316,9 @@ def test_lee_aims_at_the_lamps_and_about_the_mirror_direction():
     low = records_mod.sun_record((1.0, 0.0, 0.02), math.radians(4.0), 1.0)
     records = [rect, low]
     n = 200_000
-    u = np.random.default_rng(41).random((n, lee.uniforms_needed("symmetric")))
-    P, wi = np.broadcast_to(P0, (n, 3)), np.broadcast_to(WI, (n, 3))
     assert lee.light_sampling.spike_angle(records, P0[None], np.array([[0.0, 0.0, 1.0]]),
                                           mirror[None])[0] > 0.0
-    wo, w, terms = lee.sample_light_sampled(bsdf, records, P, wi, u)
-    assert np.all(w >= 0.0)
-    _, w_plain, _ = bsdf.sample(wi, np.random.default_rng(42).random((n, 6)))
-    m, e = _mean_and_error(w)
-    m_p, e_p = _mean_and_error(w_plain)
-    carried_all = sum(w_k[0] for _, _, w_k, _ in terms)
-    assert np.all(np.abs(m + carried_all - m_p) <= 5 * np.hypot(e, e_p)), (m, carried_all, m_p)
+    P, wi, wo, w, terms, _ = _lee_sample_holds_the_albedo(bsdf, records, n, 41)
     rng = np.random.default_rng(43)
     for rec, (axis, th_k, w_k, _) in zip(records, terms):
         inside = lamps.lamp_pdf(rec, P0, wo) > 0

@@ -21,8 +21,9 @@ from .symmetric import eval
 # The bounce terms aimed at the lamps (osl LEE_AIMED_ORDERS).
 AIMED_ORDERS = 16
 # Uniforms of one Native + Residual sample: 0-5 the sampler (3-5: an asymmetric groove's
-# partner), 6 the branch, 7-9 the lamp and the direction toward it, then (asymmetric grooves) one per frame, k and side of
-# the aimed terms' Monte Carlo rule (eval_asymmetric's u; osl LEE_PARTNER_DIM).
+# partner), 6 the branch, 7-9 the lamp (or the spike) and the direction, then (asymmetric
+# grooves) one per frame, k and side of the aimed terms' Monte Carlo rule (eval_asymmetric's u;
+# osl LEE_PARTNER_DIM).
 PARTNER_DIM = 10
 
 
