@@ -44,7 +44,8 @@
 // a; each factor is bounded on those ranges.
 
 // Least masking factor of r cos over the cone (lam_o: the largest Lambda(wo) there): G2 with no
-// native part, G2 - c G2_hc = (1 - c) G1(wo) G2_hc for separable masking beside one.
+// native part, G2 - c G2_hc = (1 - c) G1(wo) G2_hc for separable masking beside one (a Beckmann
+// split's G2 - c G2_native is at least that: split.h MFL_BECKMANN_LAMBDA_GAP).
 float residual_masking_lo(int masking, int split, float lam_i, float lam_o, float cos_h_max,
                           float cos_o_min, float wi_z, float u_hi)
 {
@@ -71,7 +72,7 @@ color fresnel_lo(int fresnel_type, float u_lo, float u_hi, float ior, color n, c
 }
 
 // Lower bound of r cos over the cone, without the tint; 0 where the cone reaches a horizon or no
-// bound holds (split: whether the GGX native part c F f_ggx is returned beside the residual).
+// bound holds (split: whether the native part c F f_native is returned beside the residual).
 color cone_value_lo(int masking, int dist, int fresnel_type, int split, vector wi, vector a,
                     float th, float ax, float ay, float ior, color n, color k)
 {

@@ -136,7 +136,7 @@ closure color delta_reflection(normal m)
 // ---------------------------------------------------------------------------------------
 // Cycles' native closures beside our delta lobes (docs/light-sampling.md).
 
-// Whether Cycles has a native closure equal to the model's single scattering (GGX): always,
+// Whether Cycles has a native closure for the model's single scattering (GGX, Beckmann): always,
 // but for a conductor only where its conductor_bsdf is exact (MFL_EXACT_CONDUCTOR, Blender 5.0
 // on, defined by the add-on from addon/compat.py; 4.x approximates the conductor Fresnel).
 int has_native(int fresnel_type)

@@ -1,11 +1,12 @@
 // Twin: addon/lab/reference/split.py (the light-sampled split: native part and residual).
 // Microfacet Lab: the light-sampled split (docs/light-sampling.md):
-//   f = c(wi) F f_ggx + r,   r >= 0,
-// F f_ggx Cycles' native closure (height-correlated Smith GGX with the model's alphas and
-// Fresnel factor F), which Cycles light-samples, and r the model's own stochastic lobe.
-// c = tint G_lo is a lower bound of f / (F f_ggx) over every wo, so r is never negative (Cycles
-// drops negative weights): G_lo the least ratio G2 / G2_hc (height-correlated 1, separable
-// 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99). Which part a sample returns: split_closures
+//   f = c(wi) F f_native + r,   r >= 0,
+// F f_native Cycles' native closure (height-correlated Smith GGX or Beckmann with the model's
+// alphas and Fresnel factor F), which Cycles light-samples, and r the model's own stochastic
+// lobe. c = tint G_lo is a lower bound of f / (F f_native) over every wo, so r is never negative
+// (Cycles drops negative weights): G_lo the least ratio G2 / G2_native (height-correlated 1,
+// separable 1 / (1 + Lambda(wi)); Heitz 2014 eqs. 98, 99; Beckmann times 1 - 2
+// MFL_BECKMANN_LAMBDA_GAP, see lambda_native). Which part a sample returns: split_closures
 // (cycles.h).
 #ifndef MFL_SPLIT_H
 #define MFL_SPLIT_H
@@ -100,38 +101,71 @@ color conductor_lower_bound(vector wi, color n, color k)
 // ---------------------------------------------------------------------------------------
 // The native part.
 
-// c / tint (split.native_factor): G_lo, the least G2 / G2_hc over wo (1 for height-correlated
-// masking, 1 / (1 + Lambda(wi)) for separable). The native closure carries the model's own
-// Fresnel factor (native_ggx), so c needs no Fresnel bound.
-float native_factor(int masking, int dist, vector wi, float ax, float ay)
+// Cycles' Smith Lambda for its native closure: GGX exact (lambda_); Beckmann the rational
+// approximation of Walter 2007 eq. 27 (G1 = (3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2)
+// for a < 1.6, else 1), which is what Cycles' Beckmann closure evaluates.
+float lambda_native(int dist, vector w, float ax, float ay)
 {
-    return (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay)) : 1.0;
+    if (dist == MFL_DISTRIBUTION_GGX)
+        return lambda_(dist, w, ax, ay);
+    float z = abs(w[2]);
+    float p2 = (ax * ax * w[0] * w[0] + ay * ay * w[1] * w[1]) / max(z * z, 1e-30);
+    if (p2 < 0.39)  // a = 1 / sqrt(p2) > 1.6
+        return 0.0;
+    float a = 1.0 / sqrt(p2);
+    return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
 }
 
-// The residual's value per unit of D / (4 wi.n), without the tint: F G2 - c F_n G2_hc, where
-// F_n = F if the native part carries the model's Fresnel (exact), else 1 (Blender 4.x: c holds
-// a Fresnel bound). Not clamped: a caller subtracts the controls first.
+// G2 of Cycles' native closure: height-correlated, with lambda_native (Heitz 2014 eq. 99).
+float G2_native(int dist, vector wi, vector wo, vector m, float ax, float ay)
+{
+    if (dot(wi, m) * wi[2] <= 0.0 || dot(wo, m) * wo[2] <= 0.0)
+        return 0.0;
+    return 1.0 / (1.0 + lambda_native(dist, wi, ax, ay) + lambda_native(dist, wo, ax, ay));
+}
+
+// The most (Lambda - lambda_native) / (1 + Lambda) reaches for Beckmann over every direction
+// (split.BECKMANN_LAMBDA_GAP: 0.003117 at a = 1.34, rounded up). Then 1 + L_i' + L_o' >=
+// (1 - 2 gap) (1 + L_i + L_o), so G2_native <= G2_hc / (1 - 2 gap), and c = (1 - 2 gap) G_lo
+// keeps c G2_native <= G_lo G2_hc: the residual stays >= 0 and keeps the GGX form's bounds
+// (controls.h residual_masking_lo).
+#define MFL_BECKMANN_LAMBDA_GAP 0.0032
+
+// c / tint (split.native_factor): G_lo, the least G2 / G2_native over wo (1 for
+// height-correlated masking, 1 / (1 + Lambda(wi)) for separable; Beckmann times 1 - 2
+// MFL_BECKMANN_LAMBDA_GAP). The native closure carries the model's own Fresnel factor
+// (native_closure), so c needs no Fresnel bound.
+float native_factor(int masking, int dist, vector wi, float ax, float ay)
+{
+    float g_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay))
+                                                    : 1.0;
+    return (dist == MFL_DISTRIBUTION_GGX) ? g_lo : g_lo * (1.0 - 2.0 * MFL_BECKMANN_LAMBDA_GAP);
+}
+
+// The residual's value per unit of D / (4 wi.n), without the tint: F G2 - c F_n G2_native,
+// where F_n = F if the native part carries the model's Fresnel (exact), else 1 (Blender 4.x: c
+// holds a Fresnel bound). Not clamped: a caller subtracts the controls first.
 color residual_factor(int masking, int dist, int fresnel_type, color c, int exact, vector wi,
                       vector wo, vector m, float ax, float ay, float ior, color n, color k)
 {
     color F = fresnel_color(fresnel_type, dot(wi, m), ior, n, k);
-    float g2_hc = (c[0] + c[1] + c[2] > 0.0)
-                      ? G2(MFL_MASKING_HEIGHT_CORRELATED, dist, wi, wo, m, ax, ay) : 0.0;
-    return F * G2(masking, dist, wi, wo, m, ax, ay) - c * (exact ? F : color(1.0)) * g2_hc;
+    float g2_n = (c[0] + c[1] + c[2] > 0.0) ? G2_native(dist, wi, wo, m, ax, ay) : 0.0;
+    return F * G2(masking, dist, wi, wo, m, ax, ay) - c * (exact ? F : color(1.0)) * g2_n;
 }
 
-// Cycles' native height-correlated GGX reflection closure of a split, carrying the model's own
-// Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf with no
-// transmission for a dielectric (the same closed forms; tests/test_reference_split.py),
-// microfacet("ggx") with no Fresnel for none. `ior` is seen from wi's side (cycles_ior).
-closure color native_ggx(int fresnel_type, vector t, float ax, float ay, float ior, color n,
-                         color k)
+// Cycles' native height-correlated GGX or Beckmann reflection closure of a split, carrying the
+// model's own Fresnel factor (fresnel_color): conductor_bsdf for a conductor, dielectric_bsdf
+// with no transmission for a dielectric (the same closed forms; tests/test_reference_split.py),
+// microfacet with no Fresnel for none. `ior` is seen from wi's side (cycles_ior).
+closure color native_closure(int dist, int fresnel_type, vector t, float ax, float ay, float ior,
+                             color n, color k)
 {
+    string name = (dist == MFL_DISTRIBUTION_GGX) ? "ggx" : "beckmann";
     if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
-        return conductor_bsdf(N, t, ax, ay, n, k, "ggx");
+        return conductor_bsdf(N, t, ax, ay, n, k, name);
     if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
-        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, cycles_ior(ior), "ggx");
-    return microfacet("ggx", N, t, ax, ay, 0.0, 0);
+        return dielectric_bsdf(N, t, color(1.0), color(0.0), ax, ay, cycles_ior(ior), name);
+    return microfacet(name, N, t, ax, ay, 0.0, 0);
 }
 
 #endif  // MFL_SPLIT_H

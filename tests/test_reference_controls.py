@@ -22,11 +22,14 @@ import osl_text  # tests/osl_text.py
 
 # Models with a residual toward lamps (a height-correlated GGX reflection has none).
 CASES = [
-    ("walter_reflection", {"distribution": "beckmann", "fresnel_type": "conductor"}),
+    # Beckmann splits like GGX (a height-correlated one keeps only the residual of Cycles'
+    # approximate Lambda, bounded by 0, so its cases are separable).
+    ("walter_reflection", {"distribution": "beckmann", "masking": "separable",
+                           "fresnel_type": "conductor"}),
     ("walter_reflection", {"distribution": "beckmann", "masking": "separable",
                            "fresnel_type": "dielectric"}),
-    ("walter_reflection", {"distribution": "beckmann", "fresnel_type": "none",
-                           "anisotropy": 0.8}),
+    ("walter_reflection", {"distribution": "beckmann", "masking": "separable",
+                           "fresnel_type": "none", "anisotropy": 0.8}),
     ("walter_reflection", {"masking": "separable", "fresnel_type": "conductor"}),
     ("walter_reflection", {"masking": "separable", "fresnel_type": "none", "anisotropy": -0.6}),
     ("cook_torrance", {"fresnel_type": "conductor", "specular": 1.0}),
@@ -83,8 +86,10 @@ def test_the_cone_bound_holds_everywhere_in_the_cone(case):
 
 def test_the_cone_bound_is_tight_where_the_lobe_is_smooth():
     """Power: at roughness 0.5, a 4-degree sun near the lobe's peak, the bound carries nearly
-    all of the residual's least value (a loose bound would leave the light to the residual)."""
-    for model_id, values in (CASES[0], CASES[5]):
+    all of the residual's least value (a loose bound would leave the light to the residual).
+    Cook-Torrance: the models with no native part (a split Beckmann's residual is the small
+    masking difference, whose bound is looser and whose light Cycles' closure mostly carries)."""
+    for model_id, values in (CASES[5], CASES[6]):
         bsdf = make_bsdf(model_id, dict(values, roughness=0.5))
         wi = np.array([math.sin(0.5), 0.0, math.cos(0.5)])
         axis = np.array([-math.sin(0.55), 0.05, math.cos(0.55)])
@@ -126,7 +131,7 @@ def _mean_and_error(x):
     return x.mean(axis=0), x.std(axis=0) / math.sqrt(len(x))
 
 
-@pytest.mark.parametrize("case", [0, 1, 5])
+@pytest.mark.parametrize("case", [4, 5, 6])
 def test_residual_and_controls_sum_to_the_residual(case):
     """E[residual with controls toward the lamp] + w_K (the toon's integral over its own cone is
     1) is the residual's integral over the lamp, for the sun and a sphere lamp; and the
@@ -154,9 +159,10 @@ def test_residual_and_controls_sum_to_the_residual(case):
 
 
 def test_controls_lower_the_second_moment_under_a_small_sun():
-    """The residual's sun-lit second moment falls once the controls carry the lamp (Beckmann
-    gold r0.5 and Cook-Torrance gold r0.4 under the 4-degree sun; measured 12 and 8 times)."""
-    for case, roughness in ((0, 0.5), (5, 0.4)):
+    """The residual's sun-lit second moment falls once the controls carry the lamp (Cook-Torrance
+    gold r0.4 and Cook-Torrance dielectric r0.5 under the 4-degree sun; measured 700 and 240
+    times)."""
+    for case, roughness in ((5, 0.4), (6, 0.5)):
         bsdf = make_bsdf(CASES[case][0], dict(CASES[case][1], roughness=roughness))
         n = 60_000
         moments = []

@@ -60,7 +60,8 @@ def cone_half_vectors(wi, axis, th):
 
 def residual_masking_lo(bsdf, lam_i, lam_o, cos_h_max, cos_o_min, wi_z, u_hi, split):
     """Least masking factor of r cos over the cone: G2 (no native part) or G2 - c G2_hc with
-    c = G_lo (separable with a native part: (1 - c) G1(wo) G2_hc), lam_o the largest Lambda(wo)."""
+    c = G_lo (separable with a native part: (1 - c) G1(wo) G2_hc), lam_o the largest Lambda(wo).
+    A Beckmann split's residual G2 - c' G2_native is at least this (split.BECKMANN_LAMBDA_GAP)."""
     if bsdf.masking == "vcavity":
         return np.minimum(1.0, 2.0 * cos_h_max * np.minimum(wi_z, cos_o_min) / u_hi)
     if bsdf.masking == "separable":

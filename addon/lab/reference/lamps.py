@@ -191,7 +191,7 @@ def sample_lamps(records, P, Ng, u0, u1, u2):
 
 def sample_guided_residual(bsdf, records, P, wi, u, less=None, lam=None):
     """One guided residual sample at points P (normal z): (wo, weight, model_share), weight =
-    r cos / p(wo) (RGB, r = f_specular - c f_ggx), model_share = (1 - lam) p_model / p (osl
+    r cos / p(wo) (RGB, r = f_specular - c f_native), model_share = (1 - lam) p_model / p (osl
     sample_guided_residual). u: (..., 7) uniforms: 3 for the model's sampler, the choice
     between lamps and model, the lamp, and 2 for the lamp's direction. less(P, wi, Ng, wo):
     what to take off r cos (controls.guided_residual_beside_controls: the lamp controls'

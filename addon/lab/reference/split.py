@@ -1,26 +1,30 @@
-"""The light-sampled estimator in numpy: a model split into Cycles' native GGX closure and a
-non-negative stochastic residual (the twin of osl/split.h and of the split in the Walter
-shaders; design and measurements: docs/light-sampling.md).
+"""The light-sampled estimator in numpy: a model split into Cycles' native GGX or Beckmann
+closure and a non-negative stochastic residual (the twin of osl/split.h and of the split in the
+Walter shaders; design and measurements: docs/light-sampling.md).
 
-    f(wi, wo) = c(wi) F(wi.h) f_ggx(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
+    f(wi, wo) = c(wi) F(wi.h) f_native(wi, wo) + r(wi, wo),    r(wi, wo) >= 0 for every wo.
 
-f_ggx is height-correlated Smith GGX with F = 1 and the model's own alphas, Cycles'
-`microfacet("ggx", N, U, ax, ay, 0, 0)`; with the model's own Fresnel factor F it is Cycles'
-`conductor_bsdf(N, U, ax, ay, n, k, "ggx")` for a conductor and `dielectric_bsdf(N, U, 1, 0,
-ax, ay, eta, "ggx")` (no transmission) for a dielectric or glass's reflection: the same closed
-forms (tests/test_reference_split.py holds float32 transcriptions of Cycles' formulas to ours).
+f_native is height-correlated Smith GGX or Beckmann (the model's distribution) with F = 1 and
+the model's own alphas, Cycles' `microfacet("ggx", N, U, ax, ay, 0, 0)`; with the model's own
+Fresnel factor F it is Cycles' `conductor_bsdf(N, U, ax, ay, n, k, "ggx")` for a conductor and
+`dielectric_bsdf(N, U, 1, 0, ax, ay, eta, "ggx")` (no transmission) for a dielectric or glass's
+reflection ("beckmann" alike): the same closed forms (tests/test_reference_split.py holds
+float32 transcriptions of Cycles' formulas to ours).
 Cycles light-samples this native part (lamps, world, emissive meshes, with multiple importance
 sampling). The residual r is the stochastic delta lobe of the model's own sampler, weighted by
 (f - native) cos / pdf. It must never be negative, because Cycles drops negative closure
-weights; so c(wi) is a lower bound of f / (F f_ggx) over every wo, per RGB channel:
+weights; so c(wi) is a lower bound of f / (F f_native) over every wo, per RGB channel:
 
-    f / (F f_ggx) = tint G2(wi, wo) / G2_hc(wi, wo)
-    c(wi)         = tint G_lo(wi)
+    f / (F f_native) = tint G2(wi, wo) / G2_native(wi, wo)
+    c(wi)            = tint G_lo(wi)
 
 G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) = 1 / (1 + Li)
 (Heitz 2014 eqs. 98, 99; approached as wo grazes). So a height-correlated GGX reflection has no
-residual at all: it is Cycles' closure. Beckmann has no such bound (its tail falls faster than
-GGX's, and Cycles' Beckmann is not exact), so it stays stochastic.
+residual at all: it is Cycles' closure. Cycles' Beckmann closure evaluates Walter 2007's rational
+approximation of Lambda (`lambda_native`), within BECKMANN_LAMBDA_GAP of the exact one in the
+sense below, so for Beckmann G_lo is lowered by 1 - 2 BECKMANN_LAMBDA_GAP and even a
+height-correlated Beckmann reflection keeps a residual (under 1% of its value). Glass and Heitz
+2016 split GGX only.
 
 The shader returns one of the two reflection parts per sample, never both: when Cycles samples
 a singular closure it adds the other closures' values in that direction with the balance
@@ -158,26 +162,56 @@ def conductor_lower_bound(bsdf, wi):
     return conductor_min(bsdf.n, bsdf.k, reachable_cos_lo(wi)[..., None] * np.ones(3))
 
 
+# The largest (Lambda - lambda_native) / (1 + Lambda) over every direction for Beckmann, where
+# lambda_native is Cycles' rational approximation: 0.003117 at a = 1.34 (a dense scan of a in
+# tests/test_reference_split.py), rounded up. Then 1 + L_i' + L_o' >= (1 - 2 gap)(1 + L_i + L_o),
+# so G2_native <= G2_hc / (1 - 2 gap), and c = (1 - 2 gap) G_lo keeps c G2_native <= G_lo G2_hc:
+# the residual stays >= 0 and keeps the GGX form's bounds (controls.residual_masking_lo).
+BECKMANN_LAMBDA_GAP = 0.0032
+
+
+def lambda_native(mf: Microfacet, w):
+    """Lambda(w) (...,) of Cycles' native closure: GGX exact (Microfacet.lambda_); Beckmann the
+    rational approximation of Walter 2007 eq. 27, G1 = (3.535 a + 2.181 a^2) / (1 + 2.276 a +
+    2.577 a^2) for a < 1.6, else 1 (what Cycles' Beckmann closure evaluates)."""
+    w = np.asarray(w, dtype=float)
+    if mf.ggx or mf.delta:
+        return Microfacet.lambda_(mf, w)
+    z = np.maximum(np.abs(w[..., 2]), 1e-300)
+    p2 = ((mf.alpha_x * w[..., 0]) ** 2 + (mf.alpha_y * w[..., 1]) ** 2) / (z * z)
+    a = 1.0 / np.sqrt(np.maximum(p2, 0.39))
+    return np.where(p2 < 0.39, 0.0, ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a))
+
+
+def G2_native(mf: Microfacet, wi, wo, m):
+    """G2 (...,) of Cycles' native closure: height-correlated with lambda_native (Heitz 2014
+    eq. 99)."""
+    vis = (dot(wi, m) * wi[..., 2] > 0.0) & (dot(wo, m) * wo[..., 2] > 0.0)
+    return np.where(vis, 1.0 / (1.0 + lambda_native(mf, wi) + lambda_native(mf, wo)), 0.0)
+
+
 def masking_lower_bound(bsdf, wi):
-    """G_lo(wi) (...,): inf over wo of G2 / G2_hc (1 for height-correlated masking)."""
+    """G_lo(wi) (...,): inf over wo of G2 / G2_native (1 for height-correlated GGX; Beckmann
+    times 1 - 2 BECKMANN_LAMBDA_GAP)."""
     wi = np.asarray(wi, dtype=float)
-    if bsdf.masking == "separable":
-        return 1.0 / (1.0 + bsdf.mf.lambda_(wi))
-    return np.ones(wi.shape[:-1])
+    g = (1.0 / (1.0 + bsdf.mf.lambda_(wi)) if bsdf.masking == "separable"
+         else np.ones(wi.shape[:-1]))
+    return g if bsdf.mf.ggx else g * (1.0 - 2.0 * BECKMANN_LAMBDA_GAP)
 
 
 def supports_split(bsdf) -> bool:
     """Whether the light-sampled estimator splits this BSDF (else it renders stochastically):
-    GGX, rough enough, and not the index-matched glass nor glass seen from its denser side
-    (eta < 1: osl/walter_glass.osl says why)."""
+    rough enough, GGX or (a reflection) Beckmann, and not the index-matched glass nor glass seen
+    from its denser side (eta < 1: osl/walter_glass.osl says why)."""
     if not isinstance(bsdf, (MicrofacetBRDF, MicrofacetGlass)):
         return False
     if isinstance(bsdf, MicrofacetBRDF) and bsdf.masking == "vcavity":
         return False
-    if isinstance(bsdf, MicrofacetGlass) and (bsdf.is_passthrough or bsdf.eta <= 1.0):
+    if isinstance(bsdf, MicrofacetGlass) and (bsdf.is_passthrough or bsdf.eta <= 1.0
+                                              or not bsdf.mf.ggx):
         return False
     mf = bsdf.mf
-    return mf.ggx and not mf.delta and min(mf.alpha_x, mf.alpha_y) >= ALPHA_SPLIT_MIN
+    return not mf.delta and min(mf.alpha_x, mf.alpha_y) >= ALPHA_SPLIT_MIN
 
 
 def native_factor(bsdf, wi):
@@ -195,33 +229,43 @@ def native_weight(bsdf, wi):
     return bsdf.tint * native_factor(bsdf, wi)
 
 
-def native_ggx(bsdf) -> MicrofacetBRDF:
-    """Cycles' native part: height-correlated GGX, F = 1, the model's alphas, unit tint."""
-    mf = Microfacet("ggx", bsdf.mf.alpha_x, bsdf.mf.alpha_y)
+class NativeMicrofacet(Microfacet):
+    """The model's distribution and alphas with Cycles' Lambda (lambda_native)."""
+
+    def lambda_(self, w):
+        return lambda_native(self, w)
+
+
+def native_closure(bsdf) -> MicrofacetBRDF:
+    """Cycles' native part: height-correlated GGX or Beckmann with Cycles' Lambda
+    (NativeMicrofacet), F = 1, the model's alphas, unit tint. Its sample weight G2 / G1 uses
+    Cycles' Lambda too, over the exact visible-normal density: for Beckmann within 0.7% of the
+    closure's own albedo (albedo_share, a report figure only)."""
+    mf = NativeMicrofacet(bsdf.mf.distribution, bsdf.mf.alpha_x, bsdf.mf.alpha_y)
     return MicrofacetBRDF(mf, "height_correlated", "vndf", "none")
 
 
 def eval_native(bsdf, wi, wo):
-    """c(wi) F_n(wi.h) f_ggx(wi, wo) (..., 3): what the native closure carries."""
+    """c(wi) F_n(wi.h) f_native(wi, wo) (..., 3): what the native closure carries."""
     wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
     F_n = native_fresnel(bsdf, dot(wi, normalize(wi + wo)))
-    return native_weight(bsdf, wi) * F_n * native_ggx(bsdf).eval(wi, wo)
+    return native_weight(bsdf, wi) * F_n * native_closure(bsdf).eval(wi, wo)
 
 
 def eval_residual(bsdf, wi, wo):
-    """r = f - c f_ggx (..., 3): what the stochastic lobe carries (>= 0 by construction)."""
+    """r = f - c F_n f_native (..., 3): what the stochastic lobe carries (>= 0 by construction)."""
     return bsdf.eval(wi, wo) - eval_native(bsdf, wi, wo)
 
 
 def residual_weight_reflection(bsdf, wi, wo, m, inv_pdf_factor):
     """The residual's reflection sample weight (..., 3), as the OSL computes it:
-    tint inv_pdf_factor F (G2 - c' G2_hc), c' = G_lo (no tint; F_n = F), clamped at 0 against
-    rounding. inv_pdf_factor is the sampler's f cos / (F G2 pdf) (bsdf.py `sample`)."""
+    tint inv_pdf_factor F (G2 - c' G2_native), c' = G_lo (no tint; F_n = F), clamped at 0
+    against rounding. inv_pdf_factor is the sampler's f cos / (F G2 pdf) (bsdf.py `sample`)."""
     mf = bsdf.mf
     g2 = mf.G2(wi, wo, m, bsdf.masking)[..., None]
-    g2_hc = mf.G2(wi, wo, m, "height_correlated")[..., None]
+    g2_n = G2_native(mf, wi, wo, m)[..., None]
     F = bsdf.F(dot(wi, m))
-    w = np.asarray(inv_pdf_factor)[..., None] * np.maximum(g2 - native_factor(bsdf, wi) * g2_hc,
+    w = np.asarray(inv_pdf_factor)[..., None] * np.maximum(g2 - native_factor(bsdf, wi) * g2_n,
                                                            0.0)
     return bsdf.tint * F * w
 
@@ -241,22 +285,22 @@ def sample_residual(bsdf, wi, u):
 def albedo_share(bsdf, wi, n: int = 1 << 16, seed: int = 0):
     """Share of the directional albedo the native closure carries at each wi (..., 3) and
     its standard error: c(wi) E_n(wi) / E(wi), both albedos by Monte Carlo with n samples
-    (E_n with GGX visible normals, weight F_n G2_hc / G1; E with the model's sampler)."""
+    (E_n with the native visible normals, weight F_n G2_native / G1; E with the model's sampler)."""
     wi = normalize(np.asarray(wi, dtype=float).reshape(-1, 3))
     rng = np.random.default_rng(seed)
     u = rng.random((n, 1, 3))
     _, w_model, _ = bsdf.sample(wi[None], u)
-    wo_ggx, w_ggx, _ = native_ggx(bsdf).sample(wi[None], u)
+    wo_n, w_n, _ = native_closure(bsdf).sample(wi[None], u)
     with np.errstate(invalid="ignore"):  # a failed sample's wo may be 0; its weight is 0
-        F_n = native_fresnel(bsdf, dot(wi[None], normalize(wi[None] + wo_ggx)))
-    w_ggx = np.where(w_ggx > 0.0, w_ggx * np.nan_to_num(F_n), 0.0)
+        F_n = native_fresnel(bsdf, dot(wi[None], normalize(wi[None] + wo_n)))
+    w_n = np.where(w_n > 0.0, w_n * np.nan_to_num(F_n), 0.0)
     c = native_weight(bsdf, wi)
-    E, E_ggx = w_model.mean(axis=0), w_ggx.mean(axis=0)
-    share = np.where(E > 0, c * E_ggx / np.where(E > 0, E, 1.0), 0.0)
+    E, E_n = w_model.mean(axis=0), w_n.mean(axis=0)
+    share = np.where(E > 0, c * E_n / np.where(E > 0, E, 1.0), 0.0)
     # Delta method on the ratio of two means of the same samples.
-    cov = ((w_ggx - E_ggx) * (w_model - E)).mean(axis=0)
-    var_r = (w_ggx.var(axis=0) / np.maximum(E_ggx, 1e-30) ** 2 + w_model.var(axis=0)
-             / np.maximum(E, 1e-30) ** 2 - 2 * cov / np.maximum(E * E_ggx, 1e-30))
+    cov = ((w_n - E_n) * (w_model - E)).mean(axis=0)
+    var_r = (w_n.var(axis=0) / np.maximum(E_n, 1e-30) ** 2 + w_model.var(axis=0)
+             / np.maximum(E, 1e-30) ** 2 - 2 * cov / np.maximum(E * E_n, 1e-30))
     err = np.abs(share) * np.sqrt(np.maximum(var_r, 0.0) / n)
     return share, err
 
