@@ -130,16 +130,26 @@ float G2_native(int dist, vector wi, vector wo, vector m, float ax, float ay)
 // keeps c G2_native <= G_lo G2_hc: the residual stays >= 0 and keeps the GGX form's bounds
 // (controls.h residual_masking_lo).
 #define MFL_BECKMANN_LAMBDA_GAP 0.0032
+// Cycles samples Beckmann's visible normals exactly but divides by its own G1(wi), so its
+// BSDF-sampled estimates carry (1 + lambda_native(wi)) / (1 + Lambda(wi)), -0.31% to +0.30%
+// (split.BECKMANN_SAMPLING_TOLERANCE). A Beckmann native part is used only where Lambda(wi)
+// <= this: then lambda_native(wi) = 0 (a > 1.6) and the factor is within 2.5e-4 of 1, the
+// tolerance of the float32 Fresnel transcriptions (a >= 2: theta_i <= 63 degrees at alpha 0.25).
+#define MFL_BECKMANN_SAMPLING_TOLERANCE 2.5e-4
 
 // c / tint (split.native_factor): G_lo, the least G2 / G2_native over wo (1 for
 // height-correlated masking, 1 / (1 + Lambda(wi)) for separable; Beckmann times 1 - 2
-// MFL_BECKMANN_LAMBDA_GAP). The native closure carries the model's own Fresnel factor
-// (native_closure), so c needs no Fresnel bound.
+// MFL_BECKMANN_LAMBDA_GAP, and 0 where Lambda(wi) exceeds MFL_BECKMANN_SAMPLING_TOLERANCE).
+// The native closure carries the model's own Fresnel factor (native_closure), so c needs no
+// Fresnel bound.
 float native_factor(int masking, int dist, vector wi, float ax, float ay)
 {
-    float g_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lambda_(dist, wi, ax, ay))
-                                                    : 1.0;
-    return (dist == MFL_DISTRIBUTION_GGX) ? g_lo : g_lo * (1.0 - 2.0 * MFL_BECKMANN_LAMBDA_GAP);
+    float lam_i = lambda_(dist, wi, ax, ay);
+    float g_lo = (masking == MFL_MASKING_SEPARABLE) ? 1.0 / (1.0 + lam_i) : 1.0;
+    if (dist == MFL_DISTRIBUTION_GGX)
+        return g_lo;
+    return (lam_i <= MFL_BECKMANN_SAMPLING_TOLERANCE) ? g_lo * (1.0 - 2.0 * MFL_BECKMANN_LAMBDA_GAP)
+                                                      : 0.0;
 }
 
 // The residual's value per unit of D / (4 wi.n), without the tint: F G2 - c F_n G2_native,

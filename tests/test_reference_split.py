@@ -164,13 +164,15 @@ def _cycles_beckmann_lambda_f32(a):
 
 
 def test_beckmann_native_lambda_and_its_gap():
-    """The Beckmann split rests on two facts. (1) lambda_native is what Cycles' Beckmann closure
+    """The Beckmann split rests on three facts. (1) lambda_native is what Cycles' Beckmann closure
     evaluates: a float32 transcription of its formula agrees to 1e-5 (relative to 1 + Lambda).
     (2) BECKMANN_LAMBDA_GAP bounds (Lambda - lambda_native) / (1 + Lambda) over a dense scan
     of a = 1 / (alpha tan) (measured 0.003117 at a = 1.34) and is tight (within 3% of it), so
-    c = (1 - 2 gap) G_lo never lets c G2_native exceed G_lo G2_hc. What it would catch: a
-    transcription error, a threshold moved, or a gap rounded below the approximation's error
-    (then the residual goes negative where Cycles' Lambda is low)."""
+    c = (1 - 2 gap) G_lo never lets c G2_native exceed G_lo G2_hc. (3) The native part is used
+    only where Cycles' sampling of it is unbiased within BECKMANN_SAMPLING_TOLERANCE. What it
+    would catch: a transcription error, a threshold moved, a gap rounded below the
+    approximation's error (then the residual goes negative where Cycles' Lambda is low), or a
+    native part handed to Cycles where its sampling is off by 0.3%."""
     a = np.concatenate([np.geomspace(1e-4, 1.0, 20001), np.linspace(1.0, 8.0, 70001)])
     mf = Microfacet("beckmann", 1.0)
     theta = np.arctan(1.0 / a)
@@ -180,6 +182,17 @@ def test_beckmann_native_lambda_and_its_gap():
     gap = (exact - native) / (1.0 + exact)
     assert gap.max() <= split.BECKMANN_LAMBDA_GAP
     assert gap.max() > 0.97 * split.BECKMANN_LAMBDA_GAP - 1e-4, gap.max()
+    # (3) Where the native part is used (exact Lambda(wi) <= the tolerance), Cycles' sampling
+    # factor (1 + lambda_native) / (1 + Lambda) is within that tolerance of 1; elsewhere it
+    # reaches 0.3% (the factor a native part there would have carried).
+    kappa = (1.0 + native) / (1.0 + exact) - 1.0
+    used = exact <= split.BECKMANN_SAMPLING_TOLERANCE
+    assert used.any() and (~used).any()
+    assert np.abs(kappa[used]).max() <= split.BECKMANN_SAMPLING_TOLERANCE
+    assert np.abs(kappa[~used]).max() > 0.003
+    wi = np.stack([np.sin(theta), np.zeros_like(a), np.cos(theta)], axis=-1)
+    bsdf = make_bsdf("walter_reflection", {"distribution": "beckmann", "roughness": 1.0})
+    assert np.array_equal(split.native_factor(bsdf, wi)[:, 0] > 0.0, used)
 
 
 def test_split_is_only_offered_where_it_is_exact():
@@ -246,6 +259,8 @@ def test_osl_constants_match_the_twin():
     assert define("MFL_MIN_SEARCH_STEPS") == split.MIN_SEARCH_STEPS
     assert define("MFL_FRESNEL_MARGIN") == split.FRESNEL_MARGIN
     assert define("MFL_CUSP_K") == split.CUSP_K
+    assert define("MFL_BECKMANN_LAMBDA_GAP") == split.BECKMANN_LAMBDA_GAP
+    assert define("MFL_BECKMANN_SAMPLING_TOLERANCE") == split.BECKMANN_SAMPLING_TOLERANCE
     assert abs(define("MFL_GOLDEN") - split._GOLDEN) < 1e-15
 
 

@@ -23,7 +23,9 @@ G_lo: height-correlated 1; separable inf_wo (1 + Li + Lo) / ((1 + Li)(1 + Lo)) =
 residual at all: it is Cycles' closure. Cycles' Beckmann closure evaluates Walter 2007's rational
 approximation of Lambda (`lambda_native`), within BECKMANN_LAMBDA_GAP of the exact one in the
 sense below, so for Beckmann G_lo is lowered by 1 - 2 BECKMANN_LAMBDA_GAP and even a
-height-correlated Beckmann reflection keeps a residual (under 1% of its value). Glass and Heitz
+height-correlated Beckmann reflection keeps a residual (under 1% of its value); and as Cycles'
+Beckmann sampling divides by that approximate G1(wi), the native part is used only where
+Lambda(wi) is below BECKMANN_SAMPLING_TOLERANCE (away from grazing incidence). Glass and Heitz
 2016 split GGX only.
 
 The shader returns one of the two reflection parts per sample, never both: when Cycles samples
@@ -168,6 +170,13 @@ def conductor_lower_bound(bsdf, wi):
 # so G2_native <= G2_hc / (1 - 2 gap), and c = (1 - 2 gap) G_lo keeps c G2_native <= G_lo G2_hc:
 # the residual stays >= 0 and keeps the GGX form's bounds (controls.residual_masking_lo).
 BECKMANN_LAMBDA_GAP = 0.0032
+# Cycles samples Beckmann's visible normals exactly but divides by its own G1(wi), so its
+# BSDF-sampled estimates carry (1 + lambda_native(wi)) / (1 + Lambda(wi)): -0.31% to +0.30%,
+# the sign changing with a. A Beckmann native part is used only where Lambda(wi) <= this: then
+# lambda_native(wi) = 0 (a > 1.6) and that factor is within 2.5e-4 of 1, the tolerance of the
+# float32 Fresnel transcriptions (a >= 2: theta_i <= 63 degrees at alpha 0.25). Elsewhere the
+# residual carries the whole lobe, as without a split.
+BECKMANN_SAMPLING_TOLERANCE = 2.5e-4
 
 
 def lambda_native(mf: Microfacet, w):
@@ -192,11 +201,14 @@ def G2_native(mf: Microfacet, wi, wo, m):
 
 def masking_lower_bound(bsdf, wi):
     """G_lo(wi) (...,): inf over wo of G2 / G2_native (1 for height-correlated GGX; Beckmann
-    times 1 - 2 BECKMANN_LAMBDA_GAP)."""
+    times 1 - 2 BECKMANN_LAMBDA_GAP, and 0 where Lambda(wi) > BECKMANN_SAMPLING_TOLERANCE)."""
     wi = np.asarray(wi, dtype=float)
-    g = (1.0 / (1.0 + bsdf.mf.lambda_(wi)) if bsdf.masking == "separable"
-         else np.ones(wi.shape[:-1]))
-    return g if bsdf.mf.ggx else g * (1.0 - 2.0 * BECKMANN_LAMBDA_GAP)
+    lam_i = bsdf.mf.lambda_(wi)
+    g = 1.0 / (1.0 + lam_i) if bsdf.masking == "separable" else np.ones(wi.shape[:-1])
+    if bsdf.mf.ggx:
+        return g
+    return np.where(lam_i <= BECKMANN_SAMPLING_TOLERANCE, g * (1.0 - 2.0 * BECKMANN_LAMBDA_GAP),
+                    0.0)
 
 
 def supports_split(bsdf) -> bool:
