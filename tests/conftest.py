@@ -9,7 +9,8 @@
 - `render_lane`: does not render, but `make test` runs it in the render lane to balance the two
   lanes (in two fresh clones the other lane finished 74 and 77 s after the render lane; these
   modules took about 30 s; on 2026-12-04 the other lane again finished 44 s after the render
-  lane, and the native branches' fit, 24 s alone, joined them). Set below by module.
+  lane, and the native branches' fit, 24 s alone, joined them; on 2026-12-05, 31 s after it,
+  and Heitz 2016's walk tests, 23 s alone, joined them). Set below by module.
 
 A test that uses a fixture which renders is a render test whatever its own marks say, so the
 two lanes never both pay for one fixture (the report's smoke run is two minutes).
@@ -17,7 +18,8 @@ two lanes never both pay for one fixture (the report's smoke run is two minutes)
 import pytest
 
 RENDERING_FIXTURES = {"smoke"}  # tests/test_report.py: the report's smoke run
-RENDER_LANE_MODULES = {"test_stability.py", "test_fallback_fit.py"}
+RENDER_LANE_MODULES = {"test_stability.py", "test_fallback_fit.py",
+                       "test_reference_heitz2016_walk.py"}
 
 
 @pytest.hookimpl(tryfirst=True)
