@@ -17,6 +17,10 @@ Record slots (RECORD_SIZE floats, world space):
   14     power: guiding weight (strength times the colour's luminance), finite, > 0
   15     shape of a point or spot lamp: 1 a sphere, 0 a disk of that radius facing the shading
          point (Blender's Soft Falloff, the default; Cycles' "is_sphere" off)
+  16-18  radiance: the lamp's radiance as Cycles emits it (RGB), 0 where not predicted (a
+         spot's cone, an area lamp's spread, a lamp with nodes or light linking, a world spot).
+         It drives the shaders' control variate (osl/nee.h), whose mean is 0 whatever it says:
+         it too only moves noise.
 """
 from __future__ import annotations
 
@@ -24,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 KINDS = ("sun", "sphere", "rect", "ellipse")
-RECORD_SIZE = 16
+RECORD_SIZE = 19
 # Lamps beyond this many are not handed over (the shader loops over every record per sample).
 MAX_LAMPS = 128
 # A guiding weight is clamped to this, so that sums over 100 lamps stay finite in float.
@@ -43,10 +47,11 @@ class LampRecord:
     size: float = 0.0
     power: float = 1.0
     is_sphere: bool = False
+    radiance: tuple = (0.0, 0.0, 0.0)
 
     def floats(self) -> list[float]:
         return ([float(KINDS.index(self.kind)), *self.position, *self.axis, *self.u, *self.v,
-                 self.size, self.power, float(self.is_sphere)])
+                 self.size, self.power, float(self.is_sphere), *self.radiance])
 
 
 def _finite(values) -> bool:
@@ -69,7 +74,20 @@ def guiding_power(strength: float, colour) -> float:
     return min(p, MAX_POWER)
 
 
-def sun_record(toward_light, angle: float, power: float):
+def predicted_radiance(strength: float, colour, per_area: float) -> tuple:
+    """strength times colour over `per_area` (the lamp's Cycles normalisation: pi sin^2 of the
+    sun's half-angle, 4 pi^2 r^2 for a point lamp, pi A for an area lamp), or zeros where any
+    of it is not finite and positive."""
+    try:
+        values = tuple(float(strength) * float(c) / float(per_area) for c in colour[:3])
+    except (TypeError, ValueError, ZeroDivisionError):
+        return (0.0, 0.0, 0.0)
+    if not all(math.isfinite(x) and x >= 0.0 for x in values) or not sum(values) > 0.0:
+        return (0.0, 0.0, 0.0)
+    return tuple(min(x, MAX_POWER) for x in values)
+
+
+def sun_record(toward_light, angle: float, power: float, radiance=(0.0, 0.0, 0.0)):
     """A sun of full angle `angle` (radians) whose light comes from `toward_light`; None when
     it cannot be aimed at (zero angle: a direction, no solid angle to hit; bad values)."""
     d = _unit(toward_light)
@@ -79,20 +97,21 @@ def sun_record(toward_light, angle: float, power: float):
     one_minus_cos = 2.0 * math.sin(half / 2.0) ** 2  # 1 - cos(half), without cancellation
     if one_minus_cos <= 1e-12:
         return None
-    return LampRecord("sun", axis=d, size=one_minus_cos, power=power)
+    return LampRecord("sun", axis=d, size=one_minus_cos, power=power, radiance=tuple(radiance))
 
 
-def sphere_record(position, radius: float, power: float, is_sphere: bool = False):
+def sphere_record(position, radius: float, power: float, is_sphere: bool = False,
+                  radiance=(0.0, 0.0, 0.0)):
     """A point or spot lamp of `radius`: with Soft Falloff (Blender's default) Cycles makes it a
     disk facing the shading point, without it a sphere; None for radius 0 (a point cannot be hit
     by a ray) and bad values."""
     if power <= 0.0 or not _finite(position) or not math.isfinite(radius) or radius <= 0.0:
         return None
     return LampRecord("sphere", position=tuple(map(float, position)), size=float(radius),
-                      power=power, is_sphere=bool(is_sphere))
+                      power=power, is_sphere=bool(is_sphere), radiance=tuple(radiance))
 
 
-def area_record(shape: str, position, normal, u, v, power: float):
+def area_record(shape: str, position, normal, u, v, power: float, radiance=(0.0, 0.0, 0.0)):
     """A rectangle or ellipse with half-extent axes u, v, emitting along `normal`; None when
     degenerate."""
     n = _unit(normal)
@@ -101,4 +120,5 @@ def area_record(shape: str, position, normal, u, v, power: float):
         return None
     kind = "ellipse" if shape in ("DISK", "ELLIPSE") else "rect"
     return LampRecord(kind, position=tuple(map(float, position)), axis=n,
-                      u=tuple(map(float, u)), v=tuple(map(float, v)), power=power)
+                      u=tuple(map(float, u)), v=tuple(map(float, v)), power=power,
+                      radiance=tuple(radiance))

@@ -153,7 +153,7 @@ int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_S
     for (int i = 0; i < MFL_LAMP_COUNT && count < MFL_CONTROL_SLOTS; i++) {
         vector a;
         float th;
-        if (lamp_weight(i, P, Ng) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
+        if (lamp_share(i, P, Ng, 0) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
             continue;
         float reach = max(th, MFL_CONTROL_GROW_MAX);
         float clear = sin(reach) + MFL_CONTROL_HORIZON_MARGIN;
@@ -285,7 +285,7 @@ float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, 
 #if MFL_LAMP_COUNT > 0
     vector R = reflect(-I, N);
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float E = lamp_weight(i, P, Ng);
+        float E = lamp_share(i, P, Ng, 0);
         vector a;
         float th;
         if (E <= 0.0 || !lamp_bounding_cone(i, P, a, th))

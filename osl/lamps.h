@@ -179,35 +179,59 @@ float lamp_pdf(int i, point P, vector dir)
     return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
 }
 
-float lamps_total_weight(point P, normal Ng)
+// The lamp's radiance as the hand-over predicts it (slots 16-18), 0 where it does not.
+color lamp_predicted(int i)
+{
+    return color(lamp_datum(i, 16), lamp_datum(i, 17), lamp_datum(i, 18));
+}
+
+// Whether nee.h estimates the predicted lamps' light at this shading point: on the camera's hits
+// only (path:ray_depth 0), where a path's throughput is known (nee.h).
+int lamps_estimated_here()
+{
+    int depth = 1;
+    getattribute("path:ray_depth", depth);
+    return depth == 0;
+}
+
+// Lamp i's weight in one of two sets: set 0 the lamps the residual aims at, set 1 those whose
+// light nee.h estimates here (a predicted radiance, on the camera's hits).
+float lamp_share(int i, point P, normal Ng, int set)
+{
+    color L = lamp_predicted(i);
+    int estimated = (L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here()) ? 1 : 0;
+    return (estimated == set) ? lamp_weight(i, P, Ng) : 0.0;
+}
+
+float lamps_total_weight(point P, normal Ng, int set)
 {
     float total = 0.0;
     for (int i = 0; i < MFL_LAMP_COUNT; i++)
-        total += lamp_weight(i, P, Ng);
+        total += lamp_share(i, P, Ng, set);
     return total;
 }
 
-// sum_j pi_j p_j(dir), pi_j = weight_j / total.
-float lamps_pdf(point P, normal Ng, float total, vector dir)
+// sum_j pi_j p_j(dir) over a set, pi_j = weight_j / total.
+float lamps_pdf(point P, normal Ng, float total, vector dir, int set)
 {
     if (total <= 0.0)
         return 0.0;
     float pdf = 0.0;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float w = lamp_weight(i, P, Ng);
+        float w = lamp_share(i, P, Ng, set);
         if (w > 0.0)
             pdf += w * lamp_pdf(i, P, dir);
     }
     return pdf / total;
 }
 
-// Lamp j with probability pi_j, then a direction from p_j.
-vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u2)
+// Lamp j of a set with probability pi_j, then a direction from p_j.
+vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u2, int set)
 {
     float target = u0 * total;
     int chosen = -1;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float w = lamp_weight(i, P, Ng);
+        float w = lamp_share(i, P, Ng, set);
         if (w > 0.0) {
             chosen = i;  // the last lamp with weight catches rounding at u0 near 1
             if (target < w)
@@ -225,7 +249,7 @@ float guide_fraction(point P, normal Ng, output float total)
 {
     total = 0.0;
 #if MFL_LAMP_COUNT > 0
-    total = lamps_total_weight(P, Ng);
+    total = lamps_total_weight(P, Ng, 0);
     if (total > 0.0)
         return MFL_GUIDE_FRACTION;
 #endif
@@ -236,7 +260,8 @@ vector sample_lamps_local(point P, normal Ng, float total, vector t, vector b, n
                           vector key)
 {
 #if MFL_LAMP_COUNT > 0
-    return to_local(sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9)), t, b, n);
+    vector dir = sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9), 0);
+    return to_local(dir, t, b, n);
 #else
     return vector(0, 0, 1);
 #endif
@@ -246,7 +271,7 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
                           normal n)
 {
 #if MFL_LAMP_COUNT > 0
-    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n));
+    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n), 0);
 #else
     return 0.0;
 #endif

@@ -168,8 +168,10 @@ def test_a_saved_file_renders_the_same_without_the_add_on(tmp_path):
 
 def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
     """Render passes: an artist expects a glossy BSDF's light in Glossy Direct / Indirect (times
-    Glossy Color), none in Emission. Both parts are ordinary closures (no emission() is used),
-    so Combined must be the glossy passes' sum here (black world, a sun, metals only)."""
+    Glossy Color), none in Emission. With these passes on, the hand-over leaves the shaders'
+    control variate (osl/nee.h, whose lamp light is an emission()) off, so both parts are
+    ordinary closures and Combined must be the glossy passes' sum here (black world, a sun,
+    metals only). What it catches: the control variate left on beside the passes."""
     from addon.lab import images
 
     if not images.has_openimageio():

@@ -52,6 +52,10 @@ OSL_ONLY = {
                                        "world's",
     ("lamps.h", "lamps_density_local"): "lamps_pdf in the shading frame; numpy's frame is the "
                                         "world's",
+    ("lamps.h", "lamp_predicted"): "reads the table's radiance slots; numpy reads "
+                                   "LampRecord.radiance",
+    ("lamps.h", "lamps_estimated_here"): "reads Cycles' path:ray_depth; numpy has no paths "
+                                         "(lamp_share's camera_hit stands for it)",
 }
 
 

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from .lamps import cone_density, extents, lamp_cone, lamp_weight, sample_guided_residual
+from .lamps import cone_density, extents, lamp_cone, lamp_share, sample_guided_residual
 from .microfacet import Microfacet, dot, normalize
 from .split import conductor_min, eval_residual, native_factor, supports_split
 
@@ -194,7 +194,7 @@ def select_cones(records, P, Ng):
         axis, th, valid = lamp_bounding_cone(rec, P)
         valid = valid & (running < CONTROL_SLOTS)
         reach = np.maximum(th, GROW_MAX)
-        valid = valid & (lamp_weight(rec, P, Ng) > 0.0) & (th < 0.5 * math.pi)
+        valid = valid & (lamp_share(rec, P, Ng) > 0.0) & (th < 0.5 * math.pi)
         valid &= dot(axis, Ng) > np.sin(reach) + HORIZON_MARGIN
         for a2, th2, v2 in chosen:
             apart = np.arccos(np.clip(dot(axis, a2), -1.0, 1.0)) > reach + np.maximum(th2, GROW_MAX)
@@ -253,7 +253,7 @@ def residual_guide_fraction(bsdf, records, P, wi, terms, Ng=(0.0, 0.0, 1.0)):
     mirror = wi * np.array([-1.0, -1.0, 1.0])
     U = np.zeros(P.shape[:-1])
     for rec in records:
-        E = lamp_weight(rec, P, Ng)
+        E = lamp_share(rec, P, Ng)
         axis, th, valid = lamp_bounding_cone(rec, P)
         d = nearest_in_cone(axis, th, mirror)
         r_cos = eval_residual(bsdf, wi, d) * np.maximum(d[..., 2], 0.0)[..., None]

@@ -150,12 +150,21 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     return np.where(ok, dist * dist / (lamp_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
 
 
-def lamps_total_weight(records, P, Ng):
-    """The sum of the lamps' guiding weights at P (...,)."""
+def lamp_share(rec: LampRecord, P, Ng, set_=0, camera_hit=False):
+    """A lamp's weight in one of two sets (osl lamp_share): set 0 the lamps the residual aims
+    at, set 1 those whose light the shaders' control variate estimates (a predicted radiance,
+    on the camera's hits; osl/nee.h, which has no twin: numpy has no paths, so camera_hit stands
+    for osl lamps_estimated_here)."""
+    estimated = camera_hit and sum(rec.radiance) > 0.0
+    return lamp_weight(rec, P, Ng) if estimated == bool(set_) else np.zeros(np.shape(P)[:-1])
+
+
+def lamps_total_weight(records, P, Ng, set_=0):
+    """The sum of a set's guiding weights at P (...,)."""
     P = np.asarray(P, dtype=float)
     total = np.zeros(P.shape[:-1])
     for rec in records:
-        total = total + lamp_weight(rec, P, Ng)
+        total = total + lamp_share(rec, P, Ng, set_)
     return total
 
 
@@ -165,20 +174,20 @@ def guide_fraction(records, P, Ng):
     return np.where(total > 0.0, GUIDE_FRACTION, 0.0), total
 
 
-def lamps_pdf(records, P, Ng, dirs):
-    """sum_j pi_j p_j(dir), pi_j = weight_j / total."""
-    _, total = guide_fraction(records, P, Ng)
+def lamps_pdf(records, P, Ng, dirs, set_=0):
+    """sum_j pi_j p_j(dir) over a set, pi_j = weight_j / total."""
+    total = lamps_total_weight(records, P, Ng, set_)
     pdf = 0.0
     for rec in records:
-        pdf = pdf + lamp_weight(rec, P, Ng) * lamp_pdf(rec, P, dirs)
+        pdf = pdf + lamp_share(rec, P, Ng, set_) * lamp_pdf(rec, P, dirs)
     return np.where(total > 0.0, pdf / np.where(total > 0.0, total, 1.0), 0.0)
 
 
-def sample_lamps(records, P, Ng, u0, u1, u2):
-    """Lamp j with probability pi_j, then a direction from p_j."""
+def sample_lamps(records, P, Ng, u0, u1, u2, set_=0):
+    """Lamp j of a set with probability pi_j, then a direction from p_j."""
     P = np.asarray(P, dtype=float)
-    weights = np.stack([np.broadcast_to(lamp_weight(r, P, Ng), P.shape[:-1]) for r in records],
-                       axis=-1)
+    weights = np.stack([np.broadcast_to(lamp_share(r, P, Ng, set_), P.shape[:-1])
+                        for r in records], axis=-1)
     cdf = np.cumsum(weights, axis=-1)
     target = np.asarray(u0) * cdf[..., -1]
     chosen = np.minimum(np.sum(cdf <= target[..., None], axis=-1), len(records) - 1)

@@ -73,7 +73,7 @@ def spike_angle(records, P, Ng, mirror):
     for rec in records:
         axis, th, valid = controls.lamp_bounding_cone(rec, P)
         ang = np.arccos(np.clip(np.sum(axis * mirror, -1), -1.0, 1.0))
-        hit = ((spike == 0.0) & valid & (lamps.lamp_weight(rec, P, Ng) > 0.0)
+        hit = ((spike == 0.0) & valid & (lamps.lamp_share(rec, P, Ng) > 0.0)
                & (lamps.lamp_pdf(rec, P, mirror) > 0.0))
         spike = np.where(hit, ang + th, spike)
     return spike

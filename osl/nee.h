@@ -1,0 +1,174 @@
+// Twin: none. trace() and Cycles' emission() have no numpy counterpart; the estimator's mean is
+// the delta's by construction (below), held by tests/test_render_nee.py.
+// Microfacet Lab: the residual's lamp light as a control variate (docs/light-sampling.md, "The
+// lamps' light as a control variate").
+//
+// The delta residual meets a lamp only by chance (aimed or not), a rare and heavy sample. Let
+// g(wo) = r(wo) cos L_pred(wo) V(wo): the residual's light from the lamps as the hand-over
+// predicts it (radiance L_pred, slots 16-18 of the lamp table; V from trace()). The shader adds,
+// as a signed emission(),
+//   E = g(w_n) / p_n(w_n)  -  W_d L_pred(w_d) V(w_d),
+// w_n a direction drawn toward the predicted lamps (p_n, lamps.h), W_d and w_d the delta's own
+// weight and direction (0 where the delta carries a part that g does not count). Both terms
+// are unbiased estimates of the same integral of g, so E has mean 0 whatever L_pred and V are:
+// a stale, wrong or missing prediction, a trace() that finds nothing (OptiX), light linking or
+// a lamp with nodes change the noise, never the image. Where the prediction is right the delta's
+// lamp light (W_d L) and its subtraction cancel, and the lamp's light comes from the first term,
+// drawn over the lamp like Cycles' own next-event estimation.
+#ifndef MFL_NEE_H
+#define MFL_NEE_H
+
+#include "cycles.h"
+#include "lamps.h"
+
+#if MFL_LAMP_COUNT > 0
+// Lamp i's predicted radiance toward dir from P: 0 outside the lamp itself (no sampling
+// margin: the margin's directions see what lies beyond the lamp). dist receives the distance
+// to the lamp (1e30 for a sun).
+color lamp_radiance(int i, point P, vector dir, output float dist)
+{
+    color L = lamp_predicted(i);
+    dist = 1e30;
+    if (L[0] + L[1] + L[2] <= 0.0)
+        return color(0.0);
+    int kind = lamp_kind(i);
+    if (kind == MFL_LAMP_SUN) {
+        float omc = lamp_datum(i, 13);
+        return in_cone(dir, lamp_vector(i, 4), omc * (2.0 - omc)) ? L : color(0.0);
+    }
+    if (kind == MFL_LAMP_SPHERE) {
+        vector to = lamp_vector(i, 1) - P;
+        float d2 = dot(to, to);
+        float r = lamp_datum(i, 13);
+        if (d2 <= r * r)
+            return color(0.0);
+        float sin2 = r * r / ((lamp_datum(i, 15) > 0.5) ? d2 : d2 + r * r);
+        dist = sqrt(d2) - r;
+        return in_cone(dir, to / sqrt(d2), sin2) ? L : color(0.0);
+    }
+    vector n = lamp_vector(i, 4);
+    float cos_l = -dot(dir, n);
+    if (cos_l <= 0.0)
+        return color(0.0);
+    point c = lamp_vector(i, 1);
+    dist = dot(P - c, n) / cos_l;
+    if (dist <= 0.0)
+        return color(0.0);
+    vector u = lamp_vector(i, 7);
+    vector v = lamp_vector(i, 10);
+    vector q = P + dist * dir - c;
+    float s = dot(q, u) / dot(u, u);
+    float t = dot(q, v) / dot(v, v);
+    int inside = (kind == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+                                            : (abs(s) <= 1.0 && abs(t) <= 1.0);
+    return inside ? L : color(0.0);
+}
+#endif
+
+// The predicted radiance toward dir, times V (trace(): nothing in between), summed over the
+// lamps (each one's rays stop short of it); 0 below the geometric surface, where the delta is
+// never returned (cycles.h delta_reflection), and off the camera's hits.
+color lamps_light(point P, vector dir)
+{
+    color sum = 0;
+#if MFL_LAMP_COUNT > 0
+    if (dot(Ng, dir) < 0.0 || !lamps_estimated_here())
+        return sum;
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        float dist;
+        color L = lamp_radiance(i, P, dir, dist);
+        if (L[0] + L[1] + L[2] > 0.0 && !trace(P, dir, "maxdist", dist))
+            sum += L;
+    }
+#endif
+    return sum;
+}
+
+// The first term's direction w_n: a lamp with a predicted radiance by its guiding weight at P
+// (lamps.h lamp_share, set 1), then uniform over its cone or area (lamps.h sample_lamp).
+// Returns 0 when no such lamp has weight; else pdf receives p_n(w_n) and light
+// lamps_light(P, w_n).
+int nee_sample(point P, normal Ng, vector key, output vector dir, output float pdf,
+               output color light)
+{
+    pdf = 0.0;
+    light = 0;
+#if MFL_LAMP_COUNT > 0
+    float total = lamps_total_weight(P, Ng, 1);
+    if (total <= 0.0)
+        return 0;
+    dir = sample_lamps(P, Ng, total, rng(key, -2), rng(key, -3), rng(key, -4), 1);
+    pdf = lamps_pdf(P, Ng, total, dir, 1);
+    if (pdf <= 0.0)
+        return 0;
+    light = lamps_light(P, dir);
+    return 1;
+#else
+    return 0;
+#endif
+}
+
+// The first term for w_n, weighted by the balance heuristic against the delta's density there:
+// rv the residual's r cos toward w_n (what the delta carries there), pd any stand-in for the
+// density of the delta's directions, the same as nee_cancel's (docs/light-sampling.md).
+color nee_estimate(color rv, color light, float pn, float pd)
+{
+    return (pn > 0.0) ? rv * light / (pn + pd) : color(0.0);
+}
+
+// The delta's weight W toward a direction where light (lamps_light) is not 0: Cycles' own
+// roulette continues a path with probability sqrt(max throughput), and a path it ends would
+// leave its subtraction unpaired (an unbounded negative sample: W L for a sun of radiance
+// 16,720). So the shader plays the roulette first, keeping the delta with probability max(W)
+// and scaling it to a largest channel of 1: on the camera's hit (throughput 1) Cycles then always
+// continues it, and the delta's lamp light and its subtraction always come together.
+color nee_roulette(color W, color light, vector key)
+{
+    float m = max(W[0], max(W[1], W[2]));
+    if (light[0] + light[1] + light[2] <= 0.0 || m >= 1.0 || m <= 0.0)
+        return W;
+    return (rng(key, -5) < m) ? W / m : color(0.0);
+}
+
+// The subtraction: the delta's weight W_d toward dir times light = lamps_light(P, dir), weighted
+// by the same heuristic, p_n / (p_n + pd).
+color nee_cancel(point P, normal Ng, vector dir, color weight, color light, float pd)
+{
+#if MFL_LAMP_COUNT > 0
+    if (light[0] + light[1] + light[2] <= 0.0)
+        return color(0.0);
+    float pn = lamps_pdf(P, Ng, lamps_total_weight(P, Ng, 1), dir, 1);
+    return (pn > 0.0) ? weight * light * (pn / (pn + pd)) : color(0.0);
+#else
+    return color(0.0);
+#endif
+}
+
+// The density of the guided residual's directions (lamps.h sample_guided_residual) toward wo
+// (shading frame): (1 - lam) p_model + lam p_lamps where some aimed lamp has weight at P.
+float guided_residual_pdf(int sampler, int dist, vector wi, vector wo, float ax, float ay,
+                          vector t, vector b, normal n, float lam_hint)
+{
+    if (wo[2] <= 0.0)
+        return 0.0;
+    vector m = normalize(wi + wo);
+    float total;
+    float lam = (guide_fraction(P, n, total) > 0.0) ? lam_hint : 0.0;
+    float p = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
+    return (lam > 0.0) ? p + lam * lamps_density_local(P, n, total, wo, t, b, n) : p;
+}
+
+// The delta residual with weight W about the microfacet normal m (world space) toward dir, on
+// a shading point where the control variate is on (on), with its subtraction: pd the stand-in
+// for the delta's density the first term used (nee_estimate).
+closure color nee_delta(color W, normal m, vector dir, float pd, vector key, int on)
+{
+    color light = (on && W != color(0.0)) ? lamps_light(P, dir) : color(0.0);
+    color Wr = nee_roulette(W, light, key);
+    closure color lobe = Wr * delta_reflection(m);
+    if (light != color(0.0))
+        lobe += (-nee_cancel(P, N, dir, Wr, light, pd)) * emission();
+    return lobe;
+}
+
+#endif  // MFL_NEE_H
