@@ -177,18 +177,25 @@ color delta_weight(color w, color scale, vector key)
 // a small weight, so it would be chosen rarely and then carry the whole a + r into the lamp, a
 // rare and heavy sample (a separable gold sphere under a 4-degree sun: pixels +1.0 at 512 spp).
 // The probability without the choice weights is reference/split.py selection_probability.
-closure color split_closures(color w_native, color a_choice, closure color native,
-                             color w_residual, color w_choice, closure color residual, float u)
+// The probability q of the native part (split_closures); 1 where the residual is 0, 0 where
+// the native part is.
+float split_probability(color w_native, color a_choice, color w_residual, color w_choice)
 {
     float a_sum = max(w_native[0] + w_native[1] + w_native[2], 0.0);
     float r = max(w_residual[0] + w_residual[1] + w_residual[2], 0.0);
     if (r <= 0.0)
-        return w_native * native;
+        return 1.0;
     if (a_sum <= 0.0)
-        return w_residual * residual;
+        return 0.0;
     // Never 0 where the native part has weight (an index-matched conductor's F(1) is 0).
     float a = max(a_choice[0] + a_choice[1] + a_choice[2], 1e-4 * a_sum);
-    float q = a / (a + max(w_choice[0] + w_choice[1] + w_choice[2], r));
+    return a / (a + max(w_choice[0] + w_choice[1] + w_choice[2], r));
+}
+
+closure color split_closures(color w_native, color a_choice, closure color native,
+                             color w_residual, color w_choice, closure color residual, float u)
+{
+    float q = split_probability(w_native, a_choice, w_residual, w_choice);
     if (u < q)
         return (w_native / q) * native;
     return (w_residual / (1.0 - q)) * residual;
