@@ -208,3 +208,54 @@ def test_the_aimed_light_lands_in_the_glossy_passes(tmp_path):
     assert combined.sum() > 0
     assert abs(glossy.sum() - combined.sum()) <= 1e-4 * combined.sum()
     assert float(np.abs(glossy - combined).max()) <= 1e-4 * float(combined.max())
+
+
+def _predicts(model_id="walter_reflection") -> bool:
+    """Whether the model's text holds a lamp with a predicted radiance (slots 16-18)."""
+    from addon import lamps
+
+    text = bpy.data.texts[shader_nodes.text_name(MODELS[model_id])].as_string()
+    line = next(ln for ln in text.splitlines() if "float table[" in ln)
+    values = [float(x) for x in line.split("{")[1].split("}")[0].split(",")]
+    size = lamps.RECORD_SIZE
+    return any(sum(values[i + 16:i + 19]) > 0 for i in range(0, len(values), size))
+
+
+def test_the_prediction_is_withheld_where_it_cannot_pair(monkeypatch):
+    """The control variate (osl/nee.h) pairs its subtraction with the delta; the hand-over
+    withholds the lamps' radiance where that cannot hold or the result would show it apart: a
+    material that mixes the shader with another closure, the glossy or emission passes, a
+    --cycles-device other than the CPU. A material whose surface is the paired shader alone
+    gets Emission Sampling None (an OSL emission() is otherwise taken for a lamp) and gets its
+    own setting back once it is no longer paired. What this catches: any of these gates lost."""
+    scene = _scene(4)
+    add_sun(scene, angle_deg=5.0)
+    material = bpy.data.materials[f"000 {ROW[0].label}"]
+    material.cycles.emission_sampling = "FRONT"
+    handover.hand_over(scene)
+    assert _predicts() and material.cycles.emission_sampling == "NONE"
+
+    tree = material.node_tree
+    output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    ours = output.inputs["Surface"].links[0].from_socket
+    mix = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(ours, mix.inputs[0])
+    tree.links.new(mix.outputs[0], output.inputs["Surface"])
+    handover.hand_over(scene)
+    assert not _predicts() and material.cycles.emission_sampling == "FRONT"
+    assert _predicts("cook_torrance")  # another model's text is not held back by it
+
+    tree.links.new(ours, output.inputs["Surface"])
+    tree.nodes.remove(mix)
+    handover.hand_over(scene)
+    assert _predicts()
+    scene.view_layers[0].use_pass_emit = True
+    handover.hand_over(scene)
+    assert not _predicts()
+    scene.view_layers[0].use_pass_emit = False
+    monkeypatch.setattr("sys.argv", ["blender", "-b", "--cycles-device", "OPTIX"])
+    handover.hand_over(scene)
+    assert not _predicts()
+    monkeypatch.setattr("sys.argv", ["blender", "-b", "--cycles-device", "CPU"])
+    handover.hand_over(scene)
+    assert _predicts()
