@@ -145,7 +145,7 @@ int lamp_bounding_cone(int i, point P, output vector axis, output float th)
 // The chosen cones (table order, brightest first): lamps with weight at P whose cone, widened as
 // far as control_cone may (MFL_CONTROL_GROW_MAX), clears the horizons of N and Ng and every cone
 // chosen before; returns how many.
-int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_SLOTS],
+int select_cones(point P, normal Ng, normal Ns, int set, output vector axes[MFL_CONTROL_SLOTS],
                  output float ths[MFL_CONTROL_SLOTS])
 {
     int count = 0;
@@ -153,7 +153,7 @@ int select_cones(point P, normal Ng, normal Ns, output vector axes[MFL_CONTROL_S
     for (int i = 0; i < MFL_LAMP_COUNT && count < MFL_CONTROL_SLOTS; i++) {
         vector a;
         float th;
-        if (lamp_share(i, P, Ng, 0) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
+        if (lamp_share(i, P, Ng, set) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
             continue;
         float reach = max(th, MFL_CONTROL_GROW_MAX);
         float clear = sin(reach) + MFL_CONTROL_HORIZON_MARGIN;
@@ -210,18 +210,19 @@ color control_cone(int masking, int dist, int fresnel_type, int split, vector wi
 }
 
 // The controls of a reflection residual (masking, dist, ... as cone_value_lo; split: whether the
-// GGX native part is returned beside it): their closures, tint times w_K times the toon;
+// GGX native part is returned beside it; set: the lamps controlled, lamp_share): their
+// closures, tint times w_K times the toon;
 // weights[j] = w_K without the tint (0 where left out) and ths[j] its cone, for controls_value;
 // lamp_ths[j] the lamp's own cone within it.
-closure color control_terms(int masking, int dist, int fresnel_type, int split, vector wi,
-                            vector t, vector b, float ax, float ay, float ior, color n, color k,
+closure color control_terms(int masking, int dist, int fresnel_type, int split, int set,
+                            vector wi, vector t, vector b, float ax, float ay, float ior, color n, color k,
                             color tint, output vector axes[MFL_CONTROL_SLOTS],
                             output float ths[MFL_CONTROL_SLOTS],
                             output float lamp_ths[MFL_CONTROL_SLOTS],
                             output color weights[MFL_CONTROL_SLOTS], output int count)
 {
     closure color controls = 0;
-    count = select_cones(P, Ng, N, axes, ths);
+    count = select_cones(P, Ng, N, set, axes, ths);
     for (int j = 0; j < count; j++) {
         float th = ths[j];
         lamp_ths[j] = th;
@@ -275,7 +276,7 @@ vector nearest_in_cone(vector a, float th, vector R)
 // heuristic exact (Veach 1997, sec. 9.2.4): sampling and density use the same (masking, ...:
 // as cone_value_lo; c, exact: the native part's factor and whether its Fresnel is the model's).
 float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, int exact,
-                              vector wi, vector t, vector b, float ax, float ay, float ior,
+                              int set, vector wi, vector t, vector b, float ax, float ay, float ior,
                               color n, color k, color tint, int count,
                               vector axes[MFL_CONTROL_SLOTS], float ths[MFL_CONTROL_SLOTS],
                               color weights[MFL_CONTROL_SLOTS])
@@ -285,7 +286,7 @@ float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, 
 #if MFL_LAMP_COUNT > 0
     vector R = reflect(-I, N);
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float E = lamp_share(i, P, Ng, 0);
+        float E = lamp_share(i, P, Ng, set);
         vector a;
         float th;
         if (E <= 0.0 || !lamp_bounding_cone(i, P, a, th))

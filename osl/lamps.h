@@ -25,6 +25,11 @@
 #define MFL_LAMP_RECT 2
 #define MFL_LAMP_ELLIPSE 3
 #define MFL_GUIDE_FRACTION 0.5
+// Which lamps a function looks at (lamp_share): the ones the residual aims at and controls where
+// the control variate (nee.h) is on, the ones it takes there, or every lamp where it is off.
+#define MFL_LAMPS_AIMED 0
+#define MFL_LAMPS_PREDICTED 1
+#define MFL_LAMPS_ALL 2
 // Sampling and density use each lamp enlarged by this fraction (a cone's sin^2 and an area's
 // half-extents): where a direction lies on the lamp's rim, float rounding in our cone test and
 // in Cycles' hit test could disagree, and a direction Cycles sees inside the lamp that our
@@ -194,10 +199,13 @@ int lamps_estimated_here()
     return depth == 0;
 }
 
-// Lamp i's weight in one of two sets: set 0 the lamps the residual aims at, set 1 those whose
-// light nee.h estimates here (a predicted radiance, on the camera's hits).
+// Lamp i's weight in a set: MFL_LAMPS_AIMED the lamps the residual aims at, MFL_LAMPS_PREDICTED
+// those whose light nee.h estimates here (a predicted radiance, on the camera's hits),
+// MFL_LAMPS_ALL every lamp.
 float lamp_share(int i, point P, normal Ng, int set)
 {
+    if (set == MFL_LAMPS_ALL)
+        return lamp_weight(i, P, Ng);
     color L = lamp_predicted(i);
     int estimated = (L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here()) ? 1 : 0;
     return (estimated == set) ? lamp_weight(i, P, Ng) : 0.0;
@@ -243,13 +251,13 @@ vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u
 }
 #endif
 
-// lam for a shading point: MFL_GUIDE_FRACTION when some lamp has weight there, else 0; total
-// receives the sum of the lamps' weights.
-float guide_fraction(point P, normal Ng, output float total)
+// lam for a shading point: MFL_GUIDE_FRACTION when some lamp of the set has weight there, else
+// 0; total receives the sum of their weights.
+float guide_fraction(point P, normal Ng, int set, output float total)
 {
     total = 0.0;
 #if MFL_LAMP_COUNT > 0
-    total = lamps_total_weight(P, Ng, 0);
+    total = lamps_total_weight(P, Ng, set);
     if (total > 0.0)
         return MFL_GUIDE_FRACTION;
 #endif
@@ -257,10 +265,10 @@ float guide_fraction(point P, normal Ng, output float total)
 }
 
 vector sample_lamps_local(point P, normal Ng, float total, vector t, vector b, normal n,
-                          vector key)
+                          vector key, int set)
 {
 #if MFL_LAMP_COUNT > 0
-    vector dir = sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9), 0);
+    vector dir = sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9), set);
     return to_local(dir, t, b, n);
 #else
     return vector(0, 0, 1);
@@ -268,10 +276,10 @@ vector sample_lamps_local(point P, normal Ng, float total, vector t, vector b, n
 }
 
 float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, vector b,
-                          normal n)
+                          normal n, int set)
 {
 #if MFL_LAMP_COUNT > 0
-    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n), 0);
+    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n), set);
 #else
     return 0.0;
 #endif
@@ -285,16 +293,17 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 // and wo; pdf receives p(wo) where some lamp has weight (else 0). model_share receives
 // (1 - lam) p_model(wo) / p(wo), 1 without lamps: the weight over it is what the model's
 // sampler alone would give wo, which split_closures chooses with (a choice made from the
-// guided weight itself would undo the aiming: see split_closures).
-// 0 for an invalid sample.
+// guided weight itself would undo the aiming: see split_closures). set: the lamps aimed at
+// (lamp_share). 0 for an invalid sample.
 float sample_guided_residual(int sampler, int dist, vector wi, float ax, float ay, vector t,
-                             vector b, normal n, vector key, float lam_hint, output vector m,
-                             output vector wo, output float model_share, output float pdf)
+                             vector b, normal n, vector key, float lam_hint, int set,
+                             output vector m, output vector wo, output float model_share,
+                             output float pdf)
 {
     model_share = 1.0;
     pdf = 0.0;
     float total;
-    float lam = (guide_fraction(P, n, total) > 0.0) ? lam_hint : 0.0;
+    float lam = (guide_fraction(P, n, set, total) > 0.0) ? lam_hint : 0.0;
     if (lam <= 0.0 || rng(key, 6) >= lam) {
         float factor = sample_reflection_factor(sampler, dist, wi, ax, ay, key, m);
         wo = reflect_about(wi, m);
@@ -302,13 +311,13 @@ float sample_guided_residual(int sampler, int dist, vector wi, float ax, float a
             return factor;
     }
     else {
-        wo = sample_lamps_local(P, n, total, t, b, n, key);
+        wo = sample_lamps_local(P, n, total, t, b, n, key, set);
         m = normalize(wi + wo);
     }
     if (wi[2] <= 0.0 || wo[2] <= 0.0)
         return 0.0;
     float p_model = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
-    pdf = p_model + lam * lamps_density_local(P, n, total, wo, t, b, n);
+    pdf = p_model + lam * lamps_density_local(P, n, total, wo, t, b, n, set);
     if (pdf <= 0.0)
         return 0.0;
     model_share = p_model / pdf;

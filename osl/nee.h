@@ -147,15 +147,15 @@ color nee_cancel(point P, normal Ng, vector dir, color weight, color light, floa
 // The density of the guided residual's directions (lamps.h sample_guided_residual) toward wo
 // (shading frame): (1 - lam) p_model + lam p_lamps where some aimed lamp has weight at P.
 float guided_residual_pdf(int sampler, int dist, vector wi, vector wo, float ax, float ay,
-                          vector t, vector b, normal n, float lam_hint)
+                          vector t, vector b, normal n, float lam_hint, int set)
 {
     if (wo[2] <= 0.0)
         return 0.0;
     vector m = normalize(wi + wo);
     float total;
-    float lam = (guide_fraction(P, n, total) > 0.0) ? lam_hint : 0.0;
+    float lam = (guide_fraction(P, n, set, total) > 0.0) ? lam_hint : 0.0;
     float p = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
-    return (lam > 0.0) ? p + lam * lamps_density_local(P, n, total, wo, t, b, n) : p;
+    return (lam > 0.0) ? p + lam * lamps_density_local(P, n, total, wo, t, b, n, set) : p;
 }
 
 // The delta residual with weight W about the microfacet normal m (world space) toward dir, on
