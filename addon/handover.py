@@ -6,12 +6,13 @@ frame) and the world's bright spots (an HDRI's sun, the Sky Texture's sun disc:
 addon/world_lights.py), writes their table into every Microfacet Lab text whose shader aims
 at lamps, holds every other Microfacet Lab text to the add-on's source (a .blend compiled by
 another Blender or add-on version), and recompiles the Script nodes that use a text that
-changed. A render_pre handler
-runs it before every render: F12, `blender --background`, each frame of an animation (so animated lamps are
-handed over per frame); the harness and scripts/render_scene.py call it too.
+changed. A render_pre handler runs it before every render: F12, `blender --background`, each
+frame of an animation (so animated lamps are handed over per frame); the harness and
+scripts/render_scene.py call it too.
 
-The table only guides where the shaders' residual rays go (addon/lamps.py), so a .blend that
-renders without the add-on (its texts and bytecode are saved in the file) keeps the lamps of
+The table only guides where the shaders' residual rays go and what their control variate
+predicts (addon/lamps.py, osl/nee.h; the prediction is withheld where it could not pair: see
+hand_over), so a .blend that renders without the add-on (its texts and bytecode are saved in the file) keeps the lamps of
 the last hand-over: for animated lamps, those of the frame rendered or saved last. It still
 converges to the same image, with more noise where the lamps have moved away.
 """
