@@ -143,14 +143,20 @@ def scene_records(scene, depsgraph=None) -> list:
     return records[:lamps.MAX_LAMPS]
 
 
-def _script_nodes(text):
-    """(tree, node) for each Script node that uses `text`."""
+def _nodes(kind: str, uses):
+    """(tree, node) for each node of bl_idname `kind` in a material or node group for which
+    uses(node) holds."""
     trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None]
     trees += list(bpy.data.node_groups)
     for tree in trees:
         for node in tree.nodes:
-            if node.bl_idname == "ShaderNodeScript" and node.script == text:
+            if node.bl_idname == kind and uses(node):
                 yield tree, node
+
+
+def _script_nodes(text):
+    """(tree, node) for each Script node that uses `text`."""
+    return _nodes("ShaderNodeScript", lambda node: node.script == text)
 
 
 def _renders_on_cpu(scene) -> bool:
@@ -189,12 +195,7 @@ def _passes_combined_only(scene) -> bool:
 
 def _group_users(tree):
     """The group nodes that use node group `tree`, with the tree each sits in."""
-    trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None]
-    trees += list(bpy.data.node_groups)
-    for parent in trees:
-        for node in parent.nodes:
-            if node.bl_idname == "ShaderNodeGroup" and node.node_tree == tree:
-                yield parent, node
+    return _nodes("ShaderNodeGroup", lambda node: node.node_tree == tree)
 
 
 def _feeds_surface_alone(tree, node, depth: int = 0) -> bool:
