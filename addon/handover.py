@@ -260,17 +260,18 @@ def _without_radiance(records) -> list:
     return [dataclasses.replace(r, radiance=(0.0, 0.0, 0.0)) for r in records]
 
 
-def hand_over(scene, depsgraph=None) -> list[str]:
+def hand_over(scene, depsgraph=None, predict: bool = True) -> list[str]:
     """Write `scene`'s lamps and world spots into the lamp-aiming texts that exist and recompile
     their Script nodes; returns the names of the texts that changed (none when nothing did).
-    A text gets the lamps' predicted radiance (osl/nee.h) only where the scene renders on the CPU,
-    into Combined without the glossy and emission passes (_passes_combined_only), and every
-    Script node using it feeds a material's Surface alone (_feeds_surface_alone).
+    A text gets the lamps' predicted radiance (osl/nee.h) only with `predict`, where the scene
+    renders on the CPU, into Combined without the glossy and emission passes
+    (_passes_combined_only), and every Script node using it feeds a material's Surface alone
+    (_feeds_surface_alone).
     Every model's text is held to the add-on's source, so a .blend compiled by another Blender
     (the version facts of shaders.version_defines) or another add-on version is brought up to
     date at render time too."""
     records = scene_records(scene, depsgraph)
-    estimate = _renders_on_cpu(scene) and _passes_combined_only(scene)
+    estimate = predict and _renders_on_cpu(scene) and _passes_combined_only(scene)
     changed = []
     for model in MODELS.values():
         text = bpy.data.texts.get(shader_nodes.text_name(model))
@@ -298,11 +299,38 @@ def _on_render_pre(scene, depsgraph=None):
         print(f"Microfacet Lab: lamps not handed over ({exc}); renders stay exact, noisier")
 
 
+# After a render, and before a save, the prediction is withdrawn: the viewport (which runs no
+# render_pre) and a file rendered without the add-on would otherwise keep it while the lamps
+# move, exact but with the old lamp's light added and, rarely, taken away (a ghost highlight and
+# negative samples). Without it they aim at the last lamps, as before.
+@persistent
+def _on_render_done(scene, depsgraph=None):
+    try:
+        hand_over(scene, depsgraph, predict=False)
+    except Exception as exc:
+        print(f"Microfacet Lab: lamp prediction not withdrawn ({exc})")
+
+
+@persistent
+def _on_save_pre(*_args):
+    scene = getattr(bpy.context, "scene", None)
+    if scene is not None:
+        _on_render_done(scene)
+
+
+_HANDLERS = (("render_pre", _on_render_pre), ("render_complete", _on_render_done),
+             ("render_cancel", _on_render_done), ("save_pre", _on_save_pre))
+
+
 def register():
-    if _on_render_pre not in bpy.app.handlers.render_pre:
-        bpy.app.handlers.render_pre.append(_on_render_pre)
+    for name, handler in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if handler not in handlers:
+            handlers.append(handler)
 
 
 def unregister():
-    if _on_render_pre in bpy.app.handlers.render_pre:
-        bpy.app.handlers.render_pre.remove(_on_render_pre)
+    for name, handler in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if handler in handlers:
+            handlers.remove(handler)

@@ -23,6 +23,18 @@
 
 #define MFL_NEE_HORIZON_MARGIN 2e-3
 
+// The pair's signed emission. Compiled out without a predicted lamp: Cycles takes a shader whose
+// bytecode names emission() for a lamp (Emission Sampling Auto), so a shader without one keeps
+// none.
+closure color nee_emission(color weight)
+{
+    closure color lobe = 0;
+#if MFL_LAMP_COUNT > 0 && MFL_PREDICTED_LAMP_COUNT > 0
+    lobe = weight * emission();
+#endif
+    return lobe;
+}
+
 #if MFL_LAMP_COUNT > 0
 // Lamp i's predicted radiance toward dir from P: 0 outside the lamp itself (no sampling
 // margin: the margin's directions see what lies beyond the lamp). dist receives the distance
@@ -174,7 +186,7 @@ closure color nee_delta(color W, normal m, vector dir, float pd, vector key, int
     color Wr = nee_roulette(W, light, key);
     closure color lobe = Wr * delta_reflection(m);
     if (light != color(0.0))
-        lobe += (-nee_cancel(P, N, dir, Wr, light, pd)) * emission();
+        lobe += nee_emission(-nee_cancel(P, N, dir, Wr, light, pd));
     return lobe;
 }
 

@@ -44,7 +44,9 @@ def _lamp_count(model_id="walter_reflection") -> int:
 
 
 def test_a_plain_render_hands_the_lamps_over(tmp_path):
-    """F12 and `blender --background` go through render_pre: no harness, no user step."""
+    """F12 and `blender --background` go through render_pre: no harness, no user step. Once the
+    render is done the lamps' predicted radiance is withdrawn (render_complete), so the viewport
+    and a saved file do not keep it while the lamps move (osl/nee.h); so is it before a save."""
     scene = _scene(4)
     add_sun(scene, angle_deg=5.0)
     assert _lamp_count() == 0
@@ -52,6 +54,11 @@ def test_a_plain_render_hands_the_lamps_over(tmp_path):
     try:
         scene.render.filepath = str(tmp_path / "plain.exr")
         bpy.ops.render.render(write_still=True)
+        assert not _predicts()
+        handover.hand_over(scene)
+        assert _predicts()
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "saved.blend"), compress=False)
+        assert not _predicts()
     finally:
         handover.unregister()
     assert handover._on_render_pre not in bpy.app.handlers.render_pre
