@@ -111,37 +111,6 @@ color cone_value_lo(int masking, int dist, int fresnel_type, int split, vector w
 // ---------------------------------------------------------------------------------------
 // The controls.
 
-#if MFL_LAMP_COUNT > 0
-// A cone holding every direction toward lamp i from P: lamp_cone for suns and sphere lamps;
-// about the centre out to the farthest corner of the rectangle for area lamps (an ellipse's
-// bounding rectangle). Returns 0 where there is none.
-int lamp_bounding_cone(int i, point P, output vector axis, output float th)
-{
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
-        float omc, sin2;
-        if (!lamp_cone(i, P, axis, omc, sin2))
-            return 0;
-        th = (kind == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
-                                    : asin(sqrt(clamp(sin2, 0.0, 1.0)));
-        return 1;
-    }
-    vector to = lamp_vector(i, 1) - P;
-    float d = length(to);
-    if (d <= 0.0)
-        return 0;
-    axis = to / d;
-    th = 0.0;
-    vector u = lamp_u(i);
-    vector v = lamp_v(i);
-    for (int c = 0; c < 4; c++) {
-        vector corner = normalize(to + ((c & 1) ? u : -u) + ((c & 2) ? v : -v));
-        th = max(th, acos(clamp(dot(corner, axis), -1.0, 1.0)));
-    }
-    return 1;
-}
-#endif
-
 // The chosen cones (table order, brightest first): lamps with weight at P whose cone, widened as
 // far as control_cone may (MFL_CONTROL_GROW_MAX), clears the horizons of N and Ng and every cone
 // chosen before; returns how many.

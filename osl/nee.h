@@ -21,8 +21,6 @@
 #include "cycles.h"
 #include "lamps.h"
 
-#define MFL_NEE_HORIZON_MARGIN 2e-3
-
 // The pair's signed emission. Compiled out without a predicted lamp: Cycles takes a shader whose
 // bytecode names emission() for a lamp (Emission Sampling Auto), so a shader without one keeps
 // none.
@@ -79,21 +77,18 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
 }
 #endif
 
-// The predicted radiance toward dir, times V (trace(): nothing in between), summed over the
-// lamps (each one's rays stop short of it); 0 off the camera's hits, and where the delta would
-// not leave along dir: under the geometric surface (cycles.h delta_reflection) and up to
-// min(0.9 I.Ng, 0.01) above it, where Cycles turns the delta onto that line (clears_surface),
-// plus a margin: there a delta aimed at a 1-degree sun misses it and leaves its subtraction
-// unpaired (rough aluminium Lee, 240 x 180 px, 64 spp: a pixel of -260). Any such rule that
-// depends on the direction alone keeps the pair's mean 0.
+// The predicted radiance toward dir of the lamps estimated here (lamps.h lamp_estimated: all
+// above the line under which Cycles turns a delta, so a delta toward them leaves as drawn),
+// times V (trace(): nothing in between; each lamp's ray stops short of it), summed.
 color lamps_light(point P, vector dir)
 {
     color sum = 0;
 #if MFL_LAMP_COUNT > 0
-    if (dot(Ng, dir) < min(0.9 * dot(I, Ng), 0.01) + MFL_NEE_HORIZON_MARGIN ||
-        !lamps_estimated_here())
+    if (dot(Ng, dir) < nee_horizon())
         return sum;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        if (!lamp_estimated(i, P))
+            continue;
         float dist;
         color L = lamp_radiance(i, P, dir, dist);
         if (L[0] + L[1] + L[2] > 0.0 && !trace(P, dir, "maxdist", dist))

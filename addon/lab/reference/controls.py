@@ -23,7 +23,8 @@ import math
 
 import numpy as np
 
-from .lamps import cone_density, extents, lamp_cone, lamp_share, sample_guided_residual
+from .lamps import (cone_density, extents, lamp_bounding_cone, lamp_cone, lamp_share,  # noqa: F401
+                    sample_guided_residual)
 from .microfacet import Microfacet, dot, normalize
 from .split import conductor_min, eval_residual, native_factor, supports_split
 
@@ -158,27 +159,6 @@ def toon_value(axis, th, wo):
     c = np.cross(wo, axis)
     inside = (dot(wo, axis) > 0.0) & (np.sum(c * c, axis=-1) < np.sin(th) ** 2)
     return np.where(inside, cone_density(th), 0.0)
-
-
-def lamp_bounding_cone(rec, P):
-    """(axis, half-angle, valid): a cone holding every direction toward the lamp from P (sun and
-    sphere lamps: lamps.lamp_cone; rectangles and ellipses: about the centre, out to the farthest
-    corner of the rectangle; osl lamp_bounding_cone)."""
-    P = np.asarray(P, dtype=float)
-    if rec.kind in ("sun", "sphere"):
-        axis, omc, sin2, valid = lamp_cone(rec, P)
-        th = np.where(rec.kind == "sun", 2.0 * np.arcsin(np.sqrt(0.5 * omc)),
-                      np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
-        return axis, th, valid
-    c = np.asarray(rec.position, dtype=float)
-    u, v = extents(rec)
-    axis = normalize(c - P)
-    th = np.zeros(P.shape[:-1])
-    for su in (-1.0, 1.0):
-        for sv in (-1.0, 1.0):
-            corner = normalize(c + su * u + sv * v - P)
-            th = np.maximum(th, np.arccos(np.clip(dot(corner, axis), -1.0, 1.0)))
-    return axis, th, np.linalg.norm(c - P, axis=-1) > 0.0
 
 
 def select_cones(records, P, Ng):

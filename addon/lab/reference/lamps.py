@@ -150,13 +150,33 @@ def lamp_pdf(rec: LampRecord, P, dirs):
     return np.where(ok, dist * dist / (lamp_area(rec) * np.where(ok, cos_l, 1.0)), 0.0)
 
 
-def lamp_share(rec: LampRecord, P, Ng, set_=0, camera_hit=False):
-    """A lamp's weight in one of two sets (osl lamp_share): set 0 the lamps the residual aims
-    at, set 1 those whose light the shaders' control variate estimates (a predicted radiance,
-    on the camera's hits; osl/nee.h, which has no twin: numpy has no paths, so camera_hit stands
-    for osl lamps_estimated_here)."""
-    estimated = camera_hit and sum(rec.radiance) > 0.0
-    return lamp_weight(rec, P, Ng) if estimated == bool(set_) else np.zeros(np.shape(P)[:-1])
+def lamp_bounding_cone(rec, P):
+    """(axis, half-angle, valid): a cone holding every direction toward the lamp from P (sun and
+    sphere lamps: lamps.lamp_cone; rectangles and ellipses: about the centre, out to the farthest
+    corner of the rectangle; osl lamp_bounding_cone)."""
+    P = np.asarray(P, dtype=float)
+    if rec.kind in ("sun", "sphere"):
+        axis, omc, sin2, valid = lamp_cone(rec, P)
+        th = np.where(rec.kind == "sun", 2.0 * np.arcsin(np.sqrt(0.5 * omc)),
+                      np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
+        return axis, th, valid
+    c = np.asarray(rec.position, dtype=float)
+    u, v = extents(rec)
+    axis = normalize(c - P)
+    th = np.zeros(P.shape[:-1])
+    for su in (-1.0, 1.0):
+        for sv in (-1.0, 1.0):
+            corner = normalize(c + su * u + sv * v - P)
+            th = np.maximum(th, np.arccos(np.clip(dot(corner, axis), -1.0, 1.0)))
+    return axis, th, np.linalg.norm(c - P, axis=-1) > 0.0
+
+
+def lamp_share(rec: LampRecord, P, Ng, set_=0):
+    """A lamp's weight in a set (osl lamp_share): set 0 the lamps the residual aims at, 1 those
+    whose light the shaders' control variate estimates, 2 every lamp. The control variate
+    (osl/nee.h) acts on the camera's hits only and has no twin: numpy models the other hits,
+    where every lamp is aimed at (sets 0 and 2) and none estimated (set 1)."""
+    return np.zeros(np.shape(P)[:-1]) if set_ == 1 else lamp_weight(rec, P, Ng)
 
 
 def lamps_total_weight(records, P, Ng, set_=0):
