@@ -3,6 +3,9 @@
 compilation fails."""
 from __future__ import annotations
 
+import shutil
+import tempfile
+
 import bpy
 
 from . import shaders
@@ -43,19 +46,28 @@ def compile_script_node(node, model: Model, lamps=()) -> None:
 
     compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
 
-    text = ensure_text(model, lamps)
-    node.mode = "INTERNAL"
-    node.script = text
     messages = []
 
     def report(kind, message):
         messages.append(f"{kind}: {message}")
 
+    # Cycles' compile leaves its .oso in the temporary folder (1-4 MB a shader, every compile:
+    # a hand-over recompiles before and after each render), so it compiles into a folder of our
+    # own, removed after (the bytecode is in the node by then).
+    private = tempfile.mkdtemp(prefix="microfacet-lab-osl-")
+    saved, tempfile.tempdir = tempfile.tempdir, private
     try:
-        from cycles import osl as cycles_osl
-        cycles_osl.update_script_node(node, report)
-    except ImportError:  # the Cycles add-on is absent: assigning the script compiled it already
-        pass
+        text = ensure_text(model, lamps)
+        node.mode = "INTERNAL"
+        node.script = text
+        try:
+            from cycles import osl as cycles_osl
+            cycles_osl.update_script_node(node, report)
+        except ImportError:  # no Cycles add-on: assigning the script compiled it already
+            pass
+    finally:
+        tempfile.tempdir = saved
+        shutil.rmtree(private, ignore_errors=True)
     if not node.bytecode or len(node.outputs) == 0:
         raise ShaderCompileError(
             f"OSL compile of {text.name} produced no bytecode or no sockets"
