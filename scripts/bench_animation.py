@@ -29,6 +29,7 @@ def main(argv=None) -> int:
           f"preset {r['preset']}, a turning sun, a moving area lamp, a {args.hdri[0]}-px HDRI")
     print(f"  frame without hand-over (frame 1's lamps kept): {r['frame']:.3f} s")
     print(f"  hand-over, measured inside the handler:        {r['handover_per_frame']:.3f} s/frame")
+    print(f"  prediction withdrawn after the job:            {sum(r['live']['withdraw']):.3f} s")
     print(f"  hand-over, total difference of the two runs:   {r['overhead_per_frame']:.3f} s/frame "
           f"= {100 * r['overhead_share']:.1f}% of a frame")
     w, h, spp, seconds = r["typical"]

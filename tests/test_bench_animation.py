@@ -27,6 +27,7 @@ def test_bench_runs_and_finds_the_sun(tmp_path):
     assert file_search["share"] < 1.0
     assert len(result["live"]["frames"]) == len(result["static"]["frames"]) == 2
     assert len(result["live"]["handover"]) == 2 and len(result["static"]["handover"]) == 1
+    assert len(result["live"]["withdraw"]) == len(result["static"]["withdraw"]) == 1
 
     # The sun is found where write_hdri put it, from the file and from Blender's pixels.
     image = bpy.data.images.load(str(bench_animation.write_hdri(tmp_path / "sky.exr", 2048)))

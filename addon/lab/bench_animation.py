@@ -123,10 +123,12 @@ def spot_search(image) -> dict:
 
 
 class _FrameClock:
-    """render_pre / render_post handlers timing each frame, and hand_over's own time."""
+    """render_pre / render_post handlers timing each frame, and hand_over's own time: before a
+    frame (handover) and when the job is done and the lamps' prediction is withdrawn
+    (withdraw)."""
 
     def __init__(self):
-        self.frames, self.handover = [], []
+        self.frames, self.handover, self.withdraw = [], [], []
         self._start = None
         self._real_hand_over = handover.hand_over
 
@@ -135,7 +137,8 @@ class _FrameClock:
         try:
             return self._real_hand_over(*args, **kwargs)
         finally:
-            self.handover.append(time.perf_counter() - start)
+            seconds = time.perf_counter() - start
+            (self.handover if kwargs.get("predict", True) else self.withdraw).append(seconds)
 
     def pre(self, *_):
         self._start = time.perf_counter()
@@ -175,7 +178,8 @@ def render_animation(scene, out_dir, static: bool) -> dict:
         if drop_after_first in bpy.app.handlers.render_post:
             bpy.app.handlers.render_post.remove(drop_after_first)
         handover.register()
-    return {"total": total, "frames": clock.frames, "handover": clock.handover}
+    return {"total": total, "frames": clock.frames, "handover": clock.handover,
+            "withdraw": clock.withdraw}
 
 
 def typical_frame(hdri, preset: str, width: int = 1280, height: int = 720,
