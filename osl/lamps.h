@@ -30,6 +30,10 @@
 #define MFL_LAMPS_AIMED 0
 #define MFL_LAMPS_PREDICTED 1
 #define MFL_LAMPS_ALL 2
+// Whether the control variate (nee.h) is compiled in: only with a lamp that has a predicted
+// radiance. Without one its branches fold away (they cost the Lee shader 35% of its operations
+// after optimization, in every scene without a prediction).
+#define MFL_PAIRED (MFL_LAMP_COUNT > 0 && MFL_PREDICTED_LAMP_COUNT > 0)
 // Sampling and density use each lamp enlarged by this fraction (a cone's sin^2 and an area's
 // half-extents): where a direction lies on the lamp's rim, float rounding in our cone test and
 // in Cycles' hit test could disagree, and a direction Cycles sees inside the lamp that our

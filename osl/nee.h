@@ -27,7 +27,7 @@
 closure color nee_emission(color weight)
 {
     closure color lobe = 0;
-#if MFL_LAMP_COUNT > 0 && MFL_PREDICTED_LAMP_COUNT > 0
+#if MFL_PAIRED
     lobe = weight * emission();
 #endif
     return lobe;
