@@ -392,16 +392,18 @@ def osl_models() -> list:
     return [m for m, model in MODELS.items() if (OSL_DIR / f"{model.shader}.osl").exists()]
 
 
-def stress_cases(quick: bool = False, models=None) -> list:
+def stress_cases(quick: bool = False, models=None, estimator=None) -> list:
     """(model_id, raw values) for the OSL stress grid: per model and per combination of its
-    sampler, distribution and estimator switches, roughness extremes, IOR extremes (at roughness 0 and
-    0.3, dielectric Fresnel where there is a switch) and conductor extremes (roughness 0.3)."""
+    sampler, distribution and estimator switches (only `estimator` where given), roughness
+    extremes, IOR extremes (at roughness 0 and 0.3, dielectric Fresnel where there is a switch)
+    and conductor extremes (roughness 0.3)."""
     cases = []
     for model_id in (models if models is not None else list(MODELS)):
         model = MODELS[model_id]
         ids = {p.id for p in model.params}
         switches = [p for p in model.params if p.id in ("sampler", "distribution", "estimator")]
-        for combo in itertools.product(*(p.items for p in switches)):
+        items = [(estimator,) if p.id == "estimator" and estimator else p.items for p in switches]
+        for combo in itertools.product(*items):
             base = dict(zip((p.id for p in switches), combo))
             rough = STRESS_ROUGHNESS[::3] if quick else STRESS_ROUGHNESS
             cases += [(model_id, {**base, "roughness": r}) for r in rough]
@@ -465,9 +467,10 @@ def count_bad_pixels(layout, image, cases) -> tuple:
 
 def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int = 16,
                     quick: bool = False, cols: int = 12, seed: int = 7,
-                    sun=None) -> StressResult:
+                    sun=None, estimator=None) -> StressResult:
     """Render the stress cases through the OSL shaders and count bad pixels. `env_name` is a
-    key of grid.ENVIRONMENTS, or 'sun' with `sun` a callable(scene) adding the light."""
+    key of grid.ENVIRONMENTS, or 'sun' with `sun` a callable(scene) adding the light;
+    `estimator` keeps only that item of the estimator switches (stress_cases)."""
     from .. import nodes
     from . import grid, harness
 
@@ -478,7 +481,7 @@ def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int 
             nodes.ensure_group(m)
         except Exception as exc:  # noqa: BLE001 - a shader that does not compile is reported
             skipped[m] = f"does not compile: {exc}"
-    cases = stress_cases(quick, [m for m in MODELS if m not in skipped])
+    cases = stress_cases(quick, [m for m in MODELS if m not in skipped], estimator)
     makers = [linked_material(m, v, f"stress {i}") for i, (m, v) in enumerate(cases)]
     env = grid.ENVIRONMENTS.get(env_name) or grid.Environment(env_name, 0.05)
     layout = grid.GridLayout(rows=-(-len(cases) // cols), cols=cols, cell_px=cell_px)
