@@ -186,8 +186,9 @@ color control_cone(int masking, int dist, int fresnel_type, int split, vector wi
 // another lamp turns the pair off: then every lamp is controlled and aimed at (MFL_LAMPS_ALL).
 // The second pass is a loop, not a second call: OSL inlines every call, and two calls made the
 // Lee shader 40% larger after optimization.
-closure color control_terms(int masking, int dist, int fresnel_type, int split, output int set,
-                            vector wi, vector t, vector b, float ax, float ay, float ior, color n, color k,
+closure color control_terms(int masking, int dist, int fresnel_type, int split,
+                            output int set, vector wi, vector t, vector b, float ax, float ay,
+                            float ior, color n, color k,
                             color tint, output vector axes[MFL_CONTROL_SLOTS],
                             output float ths[MFL_CONTROL_SLOTS],
                             output float lamp_ths[MFL_CONTROL_SLOTS],
