@@ -273,15 +273,17 @@ def test_smoke_comparisons_lobes_and_rendered_spheres(smoke):
 def test_smoke_fallback_section_measures_every_preset(smoke):
     """The native-branch section: a row per preset with finite albedo errors over the bands
     of mu, the look's error under the gradient and under the sun, the picture, and the OSL-on
-    cost of both variants, for all the presets and for a model's alone (the smoke run times one
-    model)."""
-    from addon import presets
+    cost of both variants, for all the presets and for a model's alone (the smoke run renders
+    each model's first preset and times one model)."""
+    from addon.catalog import MODELS
+    from addon.lab.report.fallback import smoke_presets
 
     out, _ = smoke
     page = (out / "report.md").read_text()
     assert "## Without OSL: the native branch against the exact model" in page
     data = json.loads((out / "results.json").read_text())["fallback"]
-    assert [e["preset"] for e in data["presets"]] == sorted(presets.load_all())
+    assert [e["preset"] for e in data["presets"]] == [p.id for p in smoke_presets("smoke")]
+    assert {e["model"] for e in data["presets"]} == set(MODELS)
     for e in data["presets"]:
         assert len(e["albedo"]) >= 2 and len(e["gradient"]) == 3 and len(e["sun"]) == 3, e
         assert np.isfinite([b["error"] + b["noise"] for b in e["albedo"]]).all(), e
