@@ -76,14 +76,15 @@ def test_energy_check_would_see_a_gain():
 def test_osl_stress_grid_has_no_bad_pixel(env_key):
     """Under the sun lamp the extreme values also go through the residual aimed at it, its
     controls and the control variate (the lamp is handed over and predicted), the code paths
-    the gradient world alone never takes. Only the light-sampled estimator reads the lamps (every
-    shader gates them on it), so the sun's grid leaves the stochastic one to the gradient's."""
+    the gradient world alone never takes. The sun's grid holds the cases that may read the lamp
+    (the light-sampled estimator, above the mirror's roughness: stability.stress_cases) and
+    leaves the others to the gradient's."""
     pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
     from addon.lab.report.scenes import add_sun
 
     sun = env_key == "sun"
     result = stability.osl_stress_grid(env_key, quick=True, cell_px=12,
                                        sun=add_sun if sun else None,
-                                       estimator="light_sampled" if sun else None)
+                                       lamp_paths=sun)
     assert result.spheres >= 40 and result.pixels > 1000
     assert (result.nan, result.inf, result.negative) == (0, 0, 0), result.bad

@@ -28,9 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..catalog import COLOR, ENUM, MODELS
-from ..shaders import OSL_DIR
+from ..shaders import OSL_DIR, uses_lamps
 from .grid import sidak_z
 from .reference import make_bsdf
+from .reference.microfacet import ALPHA_DELTA
 
 NAN = float("nan")
 ALPHA_DELTA_ROUGHNESS = math.sqrt(1e-7)  # roughness whose alpha is the delta threshold
@@ -392,20 +393,34 @@ def osl_models() -> list:
     return [m for m, model in MODELS.items() if (OSL_DIR / f"{model.shader}.osl").exists()]
 
 
-def stress_cases(quick: bool = False, models=None, estimator=None) -> list:
+def _reads_lamps(model, roughness) -> bool:
+    """Whether a shader may read the lamps at this raw roughness: every one takes its mirror
+    path, lamps unread, below alpha = ALPHA_DELTA (the catalog's clamp first)."""
+    r = model.param("roughness").clamp(roughness)
+    return r * r >= ALPHA_DELTA
+
+
+def stress_cases(quick: bool = False, models=None, lamp_paths: bool = False) -> list:
     """(model_id, raw values) for the OSL stress grid: per model and per combination of its
-    sampler, distribution and estimator switches (only `estimator` where given), roughness
-    extremes, IOR extremes (at roughness 0 and 0.3, dielectric Fresnel where there is a switch)
-    and conductor extremes (roughness 0.3)."""
+    sampler, distribution and estimator switches, roughness extremes, IOR extremes (at roughness
+    0 and 0.3, dielectric Fresnel where there is a switch) and conductor extremes (roughness
+    0.3). `lamp_paths`: only the cases that may read the lamps: shaders with the lamp table,
+    the light-sampled estimator (every shader gates the lamps on it), above the mirror's
+    roughness (_reads_lamps)."""
     cases = []
     for model_id in (models if models is not None else list(MODELS)):
         model = MODELS[model_id]
+        if lamp_paths and not uses_lamps(model):
+            continue
         ids = {p.id for p in model.params}
         switches = [p for p in model.params if p.id in ("sampler", "distribution", "estimator")]
-        items = [(estimator,) if p.id == "estimator" and estimator else p.items for p in switches]
+        items = [("light_sampled",) if p.id == "estimator" and lamp_paths else p.items
+                 for p in switches]
         for combo in itertools.product(*items):
             base = dict(zip((p.id for p in switches), combo))
             rough = STRESS_ROUGHNESS[::3] if quick else STRESS_ROUGHNESS
+            if lamp_paths:
+                rough = [r for r in rough if _reads_lamps(model, r)]
             cases += [(model_id, {**base, "roughness": r}) for r in rough]
             if "ior" in ids:
                 fres = {"fresnel_type": "dielectric"} if "fresnel_type" in ids else {}
@@ -467,10 +482,10 @@ def count_bad_pixels(layout, image, cases) -> tuple:
 
 def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int = 16,
                     quick: bool = False, cols: int = 12, seed: int = 7,
-                    sun=None, estimator=None) -> StressResult:
+                    sun=None, lamp_paths: bool = False) -> StressResult:
     """Render the stress cases through the OSL shaders and count bad pixels. `env_name` is a
     key of grid.ENVIRONMENTS, or 'sun' with `sun` a callable(scene) adding the light;
-    `estimator` keeps only that item of the estimator switches (stress_cases)."""
+    `lamp_paths` keeps the cases that may read it (stress_cases)."""
     from .. import nodes
     from . import grid, harness
 
@@ -481,7 +496,7 @@ def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int 
             nodes.ensure_group(m)
         except Exception as exc:  # noqa: BLE001 - a shader that does not compile is reported
             skipped[m] = f"does not compile: {exc}"
-    cases = stress_cases(quick, [m for m in MODELS if m not in skipped], estimator)
+    cases = stress_cases(quick, [m for m in MODELS if m not in skipped], lamp_paths)
     makers = [linked_material(m, v, f"stress {i}") for i, (m, v) in enumerate(cases)]
     env = grid.ENVIRONMENTS.get(env_name) or grid.Environment(env_name, 0.05)
     layout = grid.GridLayout(rows=-(-len(cases) // cols), cols=cols, cell_px=cell_px)
