@@ -27,6 +27,8 @@ wrong visible-normal sampler from below, eta not inverted below the interface, a
 per event, walks cut short, a wrong exit closure, the forward-transmission drop not matching
 the twin.
 """
+import functools
+
 import numpy as np
 import pytest
 
@@ -38,7 +40,17 @@ from addon.lab import grid, harness  # noqa: E402
 from addon.lab.reference.quadrature import moments_at  # noqa: E402
 from grid_suites import SUITES  # noqa: E402
 
-CASES = [(suite, env) for suite in SUITES for env in ("white", "gradient")]
+ENVS = ("white", "gradient")
+CASES = [(suite, env) for suite in SUITES for env in ENVS]
+
+
+@functools.lru_cache(maxsize=1)
+def _renders(suite_name):
+    """A suite's grid under every environment, two seeds each, in one scene (its OSL compiled
+    once: harness.render_seeds_envs)."""
+    suite = SUITES[suite_name]
+    return harness.render_seeds_envs(suite.specs, [grid.ENVIRONMENTS[e] for e in ENVS],
+                                     suite.samples, (1, 2), cell_px=suite.cell_px)
 
 
 @pytest.fixture(scope="module", params=CASES, ids=[f"{s}-{e}" for s, e in CASES])
@@ -46,8 +58,8 @@ def converged(request):
     """(suite, env, layout, two seeds' images, reference, reference error image or None)."""
     suite, env = SUITES[request.param[0]], grid.ENVIRONMENTS[request.param[1]]
     tables, error_tables = suite.tables()
-    layout, (image, image2) = harness.render_seeds(suite.specs, env, suite.samples, (1, 2),
-                                                   cell_px=suite.cell_px)
+    layout, by_env = _renders(suite.name)
+    image, image2 = by_env[env.name]
     reference = grid.reference_image(layout, tables, env, moments_at)
     error = (None if error_tables is None else
              grid.reference_error_image(layout, error_tables, env, moments_at))

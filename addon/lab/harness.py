@@ -339,16 +339,29 @@ def render_seeds(specs: list, env: Environment, samples: int, seeds, **kwargs):
     """render_specs at each of `seeds` in one scene: Cycles' persistent data keeps the scene
     and its compiled OSL between the renders, so the shaders are compiled once (the pixels are
     those of separate renders). Returns (layout, [image per seed])."""
-    scene, layout = _spec_scene(specs, env, samples, seeds[0], **kwargs)
+    layout, by_env = render_seeds_envs(specs, [env], samples, seeds, **kwargs)
+    return layout, by_env[env.name]
+
+
+def render_seeds_envs(specs: list, envs: list, samples: int, seeds, **kwargs):
+    """render_seeds under each of `envs` in turn, in one scene: only the world changes between
+    them, and Cycles' persistent data recompiles only its shader, so the spheres' OSL is
+    compiled once for all (most of a grid's time). Returns (layout, {env name: [image per
+    seed]})."""
+    scene, layout = _spec_scene(specs, envs[0], samples, seeds[0], **kwargs)
     scene.render.use_persistent_data = True
-    images_ = []
+    by_env = {}
     try:
-        for seed in seeds:
-            scene.cycles.seed = seed
-            images_.append(render(scene)[0])
+        for env in envs:
+            if env is not envs[0]:
+                add_world(scene, env, kwargs.get("light_sampling", True))
+            by_env[env.name] = []
+            for seed in seeds:
+                scene.cycles.seed = seed
+                by_env[env.name].append(render(scene)[0])
     finally:
         scene.render.use_persistent_data = False
-    return layout, images_
+    return layout, by_env
 
 
 def _spec_scene(specs, env, samples, seed, cols=4, cell_px=32, materials=None, solid=False,
