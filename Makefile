@@ -19,9 +19,11 @@ COMPAT ?= 4.2 4.5 5.0
 # and the lamps: their hand-over, and the residual aimed at them and the lamp controls against
 # numpy under a large, a 4-degree and a 0.5-degree sun (Cycles' closure cutoff); glass seen from
 # inside on plane pairs (Cycles' back-face IOR changed in 5.3); the native branches rendered
-# without OSL (4.2 has no Metallic BSDF node). On the pinned release only (the same maths on
-# every version, and test time): the point and area lamps, Lee under the suns, the glass ball
-# and bowl against the traced twin, and the report's smoke run (the report is lab tooling).
+# without OSL (4.2 has no Metallic BSDF node), the lamps' control variate with the right
+# prediction. On the pinned release only (the same maths on every version, and test time): the
+# point and area lamps, Lee under the suns, the control variate without and with a wrong
+# prediction and its noise, the glass ball and bowl against the traced twin, and the report's
+# smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails bench-animation lee-furnace fallback-fit tables clean
