@@ -16,14 +16,14 @@ COMPAT ?= 4.2 4.5 5.0
 # tests/conftest.py): install the zip, build every node group and check it compiled, apply and
 # render every preset, a white-furnace sphere against the numpy reference, the CLI; the node
 # sockets, preset operator, scene specialization, a saved .blend rendered without the add-on,
-# and the lamps: their hand-over, and the residual aimed at them and the lamp controls against
-# numpy under a large, a 4-degree and a 0.5-degree sun (Cycles' closure cutoff); glass seen from
-# inside on plane pairs (Cycles' back-face IOR changed in 5.3); the native branches rendered
-# without OSL (4.2 has no Metallic BSDF node), the lamps' control variate with the right
-# prediction. On the pinned release only (the same maths on every version, and test time): the
-# point and area lamps, Lee under the suns, the control variate without and with a wrong
-# prediction and its noise, the glass ball and bowl against the traced twin, and the report's
-# smoke run (the report is lab tooling).
+# and the lamps: their hand-over, the residual aimed at them and the lamp controls against
+# numpy under a large and a 0.5-degree sun (Cycles' closure cutoff), the control variate with
+# the right prediction under a 4-degree sun; glass seen from inside on plane pairs (Cycles'
+# back-face IOR changed in 5.3); the native branches rendered without OSL (4.2 has no Metallic
+# BSDF node). On the pinned release only (the same maths on every version, and test time): the
+# point and area lamps, the 4-degree sun's aimed row, Lee under the suns, the control variate
+# without and with a wrong prediction and its noise, the glass ball and bowl against the traced
+# twin, and the report's smoke run (the report is lab tooling).
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails bench-animation lee-furnace fallback-fit tables clean

@@ -88,7 +88,9 @@ def test_full_walk_is_brighter_than_its_first_order(first_order):
 
 # -- Light Sampling: the native first order under a lamp ----------------------------------------
 SUN_DEG = 45.0  # large enough for the stochastic walk to find it often
-SUN_SAMPLES = {"light_sampled": 512, "stochastic": 4096}
+# Power margin (0.1 mean over the detectable error, the worst sphere): 2.45 at 512 / 4096
+# samples (measured), so at most 2.45 / sqrt(2) here.
+SUN_SAMPLES = {"light_sampled": 256, "stochastic": 2048}
 
 
 def _sun_row(estimator, seed):
@@ -135,6 +137,8 @@ def test_light_sampled_walk_equals_stochastic_walk_under_a_sun():
     # Power: on whole spheres a 10% error of the brightest channel would be seen.
     spheres = grid.band_stats(layout, split, stochastic, bands=((0.05, 1.0001),), sides=False)
     z_s = grid.sidak_z(3 * len(spheres))
+    margin = min(0.1 * d.reference.max() / (z_s * d.stderr.max()) for d in spheres)
+    print(f"\n[heitz sun] power margin (10% of the mean over the detectable): {margin:.2f}")
     for d in spheres:
         assert 0.1 * d.reference.max() > z_s * d.stderr.max(), \
             f"{specs[d.sphere].label}: no power (se {d.stderr}, mean {d.reference})"

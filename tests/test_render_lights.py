@@ -248,6 +248,9 @@ def small_sun_render():
     return _sun_row(AIMED_ROW, SMALL_SUN_DEG, 5, (24, 48))
 
 
+# On the older versions the 4-degree sun's path (the pair on) is the control variate's "right"
+# case's, the other suns hold the aiming, the controls and the cutoff: pinned release only.
+@pytest.mark.release_only
 def test_aimed_residual_matches_the_small_sun_reference(small_sun_render):
     layout, image, reference, quad_err = small_sun_render
     # Power: every model's brightest band must resolve a 5% bias (unaimed, the Beckmann and
