@@ -34,7 +34,7 @@ from .reference import make_bsdf
 from .reference.microfacet import ALPHA_DELTA
 
 NAN = float("nan")
-ALPHA_DELTA_ROUGHNESS = math.sqrt(1e-7)  # roughness whose alpha is the delta threshold
+ALPHA_DELTA_ROUGHNESS = math.sqrt(ALPHA_DELTA)  # roughness whose alpha is the delta threshold
 ROUGHNESS = (0.0, 1e-9, 3.1e-4, ALPHA_DELTA_ROUGHNESS, 3.2e-4, 1e-3, 0.01, 0.05, 0.2, 0.5, 0.8,
              1.0, 1.5, 100.0, -1.0, NAN)
 ETAS = (1.0, 1.0 + 1e-6, 1.0 - 1e-6, 0.1, 10.0, 100.0, 0.0, NAN)
@@ -396,8 +396,7 @@ def osl_models() -> list:
 def _reads_lamps(model, roughness) -> bool:
     """Whether a shader may read the lamps at this raw roughness: every one takes its mirror
     path, lamps unread, below alpha = ALPHA_DELTA (the catalog's clamp first)."""
-    r = model.param("roughness").clamp(roughness)
-    return r * r >= ALPHA_DELTA
+    return model.param("roughness").clamp(roughness) >= ALPHA_DELTA_ROUGHNESS
 
 
 def stress_cases(quick: bool = False, models=None, lamp_paths: bool = False) -> list:
