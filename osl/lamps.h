@@ -237,27 +237,54 @@ int lamps_estimated_here()
 #define MFL_NEE_HORIZON_MARGIN 2e-3
 float nee_horizon() { return min(0.9 * dot(I, Ng), 0.01) + MFL_NEE_HORIZON_MARGIN; }
 
-// Whether every direction toward lamp i from P rises above nee_horizon (its bounding cone), over
-// the geometric surface (the global Ng: callers pass the shading normal as theirs).
-int lamp_above_horizon(int i, point P)
+// A lamp at least this wide (its bounding cone's half-angle, radians) is estimated even where it
+// reaches below nee_horizon (lamp_estimated).
+#define MFL_NEE_WIDE_LAMP 0.1
+
+// Whether nee.h may estimate lamp i from P, over the geometric surface (the global Ng: callers
+// pass the shading normal as theirs): where every direction toward it rises above nee_horizon,
+// or where it is wide. The directions above a line at a positive height form a convex cone, so
+// an area lamp lies in it where its four corners do (an ellipse's bounding rectangle's); a sun
+// or a sphere lamp where its cone does. Below the line the estimate counts nothing either way
+// (nee.h lamps_light); what the rule keeps out is a small lamp there: the deltas Cycles turns
+// onto the line from under it meet it unaimed, rare and heavy (a point lamp on Suzanne's
+// horizon: pixels of +12 at 64 samples). A wide lamp meets them often and lightly, and the
+// estimate above the line is worth more (docs/light-sampling-measurements.md, sec. 16).
+int lamp_estimable(int i, point P)
 {
     vector axis;
     float th;
     if (!lamp_bounding_cone(i, P, axis, th))
         return 0;
+    if (th >= MFL_NEE_WIDE_LAMP)
+        return 1;
+    int kind = lamp_kind(i);
+    if (kind == MFL_LAMP_RECT || kind == MFL_LAMP_ELLIPSE) {
+        float horizon = max(nee_horizon(), 0.0);  // a convex cone
+        vector to = lamp_vector(i, 1) - P;
+        vector u = lamp_u(i);
+        vector v = lamp_v(i);
+        for (int c = 0; c < 4; c++) {
+            vector corner = to + ((c & 1) ? u : -u) + ((c & 2) ? v : -v);
+            float d = length(corner);
+            if (d <= 0.0 || dot(corner, Ng) <= horizon * d)
+                return 0;
+        }
+        return 1;
+    }
     float lowest = asin(clamp(dot(axis, Ng), -1.0, 1.0)) - th;
     return lowest > 0.0 && sin(lowest) > nee_horizon();
 }
 
 // Whether nee.h estimates lamp i's light here: a predicted radiance, on the camera's hits, and
-// the lamp wholly above nee_horizon. A lamp reaching below it stays aimed at: Cycles turns the
-// deltas drawn there onto the line, in or out of the lamp, so a subtraction would not pair with
-// them (under a 1-degree sun: pixels of -260), and those turned into it from under it would
-// meet it unaimed (a point lamp on Suzanne's horizon: pixels of +12 at 64 samples).
+// the lamp wholly above nee_horizon or wide (lamp_estimable). The estimate and its subtraction
+// count only directions above the line (nee.h lamps_light): Cycles turns the deltas drawn under
+// it onto it, in or out of the lamp, so a subtraction there would not pair with them (under a
+// 1-degree sun: pixels of -260). A small lamp reaching below it stays aimed at.
 int lamp_estimated(int i, point P)
 {
     color L = lamp_predicted(i);
-    return L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here() && lamp_above_horizon(i, P);
+    return L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here() && lamp_estimable(i, P);
 }
 
 // Lamp i's weight in a set: MFL_LAMPS_PREDICTED the lamps nee.h estimates here

@@ -57,7 +57,7 @@ OSL_ONLY = {
     ("lamps.h", "lamps_estimated_here"): "reads Cycles' path:ray_depth; numpy has no paths "
                                          "(its lamp_share models the hits off the camera's)",
     ("lamps.h", "nee_horizon"): "the control variate's horizon (nee.h, no twin): reads I and Ng",
-    ("lamps.h", "lamp_above_horizon"): "the control variate's horizon rule (nee.h, no twin)",
+    ("lamps.h", "lamp_estimable"): "the control variate's horizon rule (nee.h, no twin)",
     ("lamps.h", "lamp_estimated"): "the control variate's lamps (nee.h, no twin); numpy's "
                                    "lamp_share models the hits off the camera's",
 }

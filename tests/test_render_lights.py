@@ -501,7 +501,7 @@ def test_a_mix_shader_factor_of_0_2_keeps_every_part_under_a_half_degree_sun():
 # subtract the delta's own light from it, so the pair has mean 0 whatever the prediction says.
 # Rendered with the prediction off (0: the lamps are aimed at, as for a spot lamp or on the GPU),
 # right (1) and three times too bright (3). What this catches: a subtraction that is not the
-# mirror of the estimate (another density in its balance heuristic, a term the delta does not
+# mirror of the estimate (another density in its share, nee_share, a term the delta does not
 # carry, the roulette that pairs it with the delta missing: unbounded negative pixels), a
 # prediction that is silently dropped (the noise test), and the aimed path left untested now
 # that a predicted sun no longer takes it. A wrong prediction leaves the delta's hits on the sun
