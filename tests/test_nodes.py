@@ -315,8 +315,13 @@ from addon.lab import grid, harness
 
 CASES = [(m.id, p.id, item) for m in MODELS.values() for p in m.params if p.kind == ENUM
          for item in p.items]
-if mode == "varying":  # one item of each enum shows it read at run time (19 spheres, not 42)
-    CASES = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
+if mode == "varying":  # one item of each enum shows it read at run time (20 spheres, not 42),
+    # and a second where only one model has the enum (Lee's groove): Blender before 5.1 optimizes
+    # on every core and its listing's lines interleave, so one sphere's read can be lost (a 5.0.1
+    # run read the groove "connected" twice and "useparam" never)
+    firsts = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
+    single = [c for c in firsts if sum(d[1] == c[1] for d in firsts) == 1]
+    CASES = firsts + [next(d for d in CASES if d[:2] == c[:2] and d != c) for c in single]
 
 def maker(i, model_id, pid, item):
     def make():
