@@ -98,22 +98,37 @@ color lamps_light(point P, vector dir)
     return sum;
 }
 
-// Directions per camera hit for the first term: a jittered MFL_NEE_GRID x MFL_NEE_GRID grid over
-// the lamp's two sampling dimensions. The shader's random numbers are white noise (cycles.h
-// rng), where Cycles stratifies its own light samples over a pixel's samples: on the look-dev
-// Suzanne's area lamp a Lambertian's light through this estimate, one direction per sample, had
-// 8.8 times the variance of Cycles' Diffuse BSDF (docs/light-sampling-measurements.md, sec. 16).
+// The first term's directions per camera hit: a jittered grid x grid over the lamp's two sampling
+// dimensions, grid = MFL_NEE_GRID where a lamp it estimates is wide (lamps.h MFL_NEE_WIDE_LAMP),
+// else 1. The shader's random numbers are white noise (cycles.h rng), where Cycles stratifies
+// its own light samples over a pixel's samples: on the look-dev Suzanne's area lamp a
+// Lambertian's light through this estimate, one direction per sample, had 8.8 times the variance
+// of Cycles' Diffuse BSDF (docs/light-sampling-measurements.md, sec. 16). Across a narrow lamp
+// the integrand hardly changes, and more directions would only cost.
 #define MFL_NEE_GRID 2
-#define MFL_NEE_SAMPLES (MFL_NEE_GRID * MFL_NEE_GRID)
 
-// Direction j (0 <= j < MFL_NEE_SAMPLES) of the first term: a lamp with a predicted radiance by
-// its guiding weight at P (lamps.h lamp_share, set 1), then over its cone or area (lamps.h
+int nee_grid(point P, normal Ng)
+{
+#if MFL_LAMP_COUNT > 0
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        vector axis;
+        float th;
+        if (lamp_share(i, P, Ng, 1) > 0.0 && lamp_bounding_cone(i, P, axis, th) &&
+            th >= MFL_NEE_WIDE_LAMP)
+            return MFL_NEE_GRID;
+    }
+#endif
+    return 1;
+}
+
+// Direction j (0 <= j < grid^2) of the first term: a lamp with a predicted radiance by its
+// guiding weight at P (lamps.h lamp_share, set 1), then over its cone or area (lamps.h
 // sample_lamp) from cell j of the grid. The mean over j is an unbiased estimate: each cell is
 // drawn from uniformly and the cells tile the square. Returns 0 when no such lamp has weight;
 // else pdf receives p_n(w_n), the density of the cells' mixture (lamps_pdf), and light
 // lamps_light(P, w_n).
-int nee_sample(point P, normal Ng, vector key, int j, output vector dir, output float pdf,
-               output color light)
+int nee_sample(point P, normal Ng, vector key, int j, int grid, output vector dir,
+               output float pdf, output color light)
 {
     pdf = 0.0;
     light = 0;
@@ -122,8 +137,8 @@ int nee_sample(point P, normal Ng, vector key, int j, output vector dir, output 
     if (total <= 0.0)
         return 0;
     int dim = -10 - 3 * j;
-    float u1 = (float(j % MFL_NEE_GRID) + rng(key, dim - 1)) / float(MFL_NEE_GRID);
-    float u2 = (float(j / MFL_NEE_GRID) + rng(key, dim - 2)) / float(MFL_NEE_GRID);
+    float u1 = (float(j % grid) + rng(key, dim - 1)) / float(grid);
+    float u2 = (float(j / grid) + rng(key, dim - 2)) / float(grid);
     dir = sample_lamps(P, Ng, total, rng(key, dim), u1, u2, 1);
     pdf = lamps_pdf(P, Ng, total, dir, 1);
     if (pdf <= 0.0)
@@ -149,7 +164,7 @@ float nee_share(float pn, float pd)
 
 // One direction's first term, weighted by nee_share: rv the residual's r cos toward w_n (what the
 // delta carries there), pd the stand-in for the delta's density, the same as nee_cancel's. The
-// caller sums it over the MFL_NEE_SAMPLES directions and divides by their number.
+// caller sums it over the grid's directions and divides by their number.
 color nee_estimate(color rv, color light, float pn, float pd)
 {
     return (pn > 0.0) ? rv * light * (nee_share(pn, pd) / pn) : color(0.0);

@@ -359,7 +359,11 @@ def test_aimed_residual_matches_the_area_lamp_reference(area_render):
 LEE_ROW = [SphereSpec("lee_vgroove", {"roughness": 0.6, "groove": g}, f"Lee {g} r0.6")
            for g in ("symmetric", "asymmetric")]
 LEE_LAYOUT = grid.GridLayout(rows=2, cols=len(LEE_ROW), cell_px=64, spacing=LAYOUT.spacing)
-LEE_SAMPLES = 4096  # small cells: enough samples that a 5% bias of the brightest band shows
+# Small cells: enough samples that a 5% bias of the brightest band shows. Power margins (5% of
+# the band over z_crit times its stderr), symmetric / asymmetric: 11.9 / 20.5 at 4096 samples
+# (7.3 / 9.1 before the control variate's four directions over a wide lamp), so about 5.9 / 10
+# at 1024.
+LEE_SAMPLES = 1024
 
 
 @pytest.fixture(scope="module")
@@ -400,6 +404,9 @@ def lee_area_render():
         area_lamp_term, layout, LEE_ROW, AREA_CENTRE, u, v, radiance, n), (24, 24))
 
 
+# Power margins, symmetric / asymmetric: 7.0 / 2.7 (3.9 / 1.9 before the control variate's four
+# directions over a wide lamp); at 512 samples 1.9 / 1.7, a heavier tail than 1 / sqrt(2) would
+# give, so not fewer.
 LEE_AREA_SAMPLES = 1024
 
 
