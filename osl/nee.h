@@ -99,16 +99,19 @@ color lamps_light(point P, vector dir)
 }
 
 // The first term's directions per camera hit: a jittered grid x grid over the lamp's two sampling
-// dimensions, grid = MFL_NEE_GRID where a lamp it estimates is wide (lamps.h MFL_NEE_WIDE_LAMP),
-// else 1. The shader's random numbers are white noise (cycles.h rng), where Cycles stratifies
-// its own light samples over a pixel's samples: on the look-dev Suzanne's area lamp a
-// Lambertian's light through this estimate, one direction per sample, had 8.8 times the variance
-// of Cycles' Diffuse BSDF (docs/light-sampling-measurements.md, sec. 16). Across a narrow lamp
-// the integrand hardly changes, and more directions would only cost.
+// dimensions, grid = MFL_NEE_GRID where a lamp it estimates is wide (lamps.h MFL_NEE_WIDE_LAMP)
+// or the model's value toward it is itself an estimate (stochastic: Heitz 2016's walk, Lee's
+// asymmetric grooves), else 1. The shader's random numbers are white noise (cycles.h rng), where
+// Cycles stratifies its own light samples over a pixel's samples: on the look-dev Suzanne's area
+// lamp a Lambertian's light through this estimate, one direction per sample, had 8.8 times the
+// variance of Cycles' Diffuse BSDF (docs/light-sampling-measurements.md, sec. 16). Across a
+// narrow lamp a closed form hardly changes, and more directions would only cost.
 #define MFL_NEE_GRID 2
 
-int nee_grid(point P, normal Ng)
+int nee_grid(point P, normal Ng, int stochastic)
 {
+    if (stochastic)
+        return MFL_NEE_GRID;
 #if MFL_LAMP_COUNT > 0
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
         vector axis;
