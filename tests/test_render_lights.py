@@ -527,8 +527,8 @@ NEE_ROW = [
 # a 10% bias needs 2048 samples.
 NEE_CASES = {"off": (0.0, SMALL_SUN_DEG, 512, 0.1), "right": (1.0, SMALL_SUN_DEG, 512, 0.1),
              "3x, 30-degree sun": (3.0, SUN_ANGLE_DEG, 2048, 0.1)}
-# Band noise with the right prediction over none: 0.39, 0.36, 0.21 (seeds 23, 24; measured), ~1
-# if the prediction were dropped.
+# Band noise with the right prediction over none: 0.13, 0.36, 0.18 (seeds 23, 24; measured; 0.39,
+# 0.36, 0.21 with the balance heuristic for the pair's share), ~1 if the prediction were dropped.
 NEE_NOISE_RATIO = 0.6
 
 
