@@ -139,7 +139,7 @@ int nee_sample(point P, normal Ng, vector key, int j, int grid, output vector di
     float total = lamps_total_weight(P, Ng, 1);
     if (total <= 0.0)
         return 0;
-    int dim = -10 - 3 * j;
+    int dim = -10 - 3 * j;  // three per direction, clear of delta_weight's -1 and the roulette's -5
     float u1 = (float(j % grid) + rng(key, dim - 1)) / float(grid);
     float u2 = (float(j / grid) + rng(key, dim - 2)) / float(grid);
     dir = sample_lamps(P, Ng, total, rng(key, dim), u1, u2, 1);
