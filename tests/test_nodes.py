@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -315,13 +316,8 @@ from addon.lab import grid, harness
 
 CASES = [(m.id, p.id, item) for m in MODELS.values() for p in m.params if p.kind == ENUM
          for item in p.items]
-if mode == "varying":  # one item of each enum shows it read at run time (20 spheres, not 42),
-    # and a second where only one model has the enum (Lee's groove): Blender before 5.1 optimizes
-    # on every core and its listing's lines interleave, so one sphere's read can be lost (a 5.0.1
-    # run read the groove "connected" twice and "useparam" never)
-    firsts = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
-    single = [c for c in firsts if sum(d[1] == c[1] for d in firsts) == 1]
-    CASES = firsts + [next(d for d in CASES if d[:2] == c[:2] and d != c) for c in single]
+if mode == "varying":  # one item of each enum shows it read at run time (19 spheres, not 42)
+    CASES = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
 
 def maker(i, model_id, pid, item):
     def make():
@@ -374,10 +370,8 @@ stats = [re.sub(r" in [0-9.]+s$", "", re.sub(r",[^,]*current", "", line.strip())
                      r"|Merged|After optimization|Instance connections)", line)]
 # With OSL_OPTIONS debug=1 the optimizer lists each layer before and after optimizing: a folded
 # enum is read by no `useparam` op, a connected one is listed "param int in_<id> (...) connected".
-# Blender before 5.1 optimizes the groups on every core at once and the threads' listings
-# interleave within lines ("const float $const26 (used 154 ...min $tmp57 in_estimator )" was read
-# in a 5.0.1 listing), so a loose match once counted a `useparam` of one thread and an enum name of
-# another as one read. Only whole lines of the listing's two forms count.
+# Only whole lines of the listing's two forms count (the test lists only where the lines are
+# whole: SERIAL_LISTING).
 USEPARAM = re.compile(r"^ *\\d+: useparam((?: [^ \\t]+)+)\\t#", re.M)
 CONNECTED = re.compile(r"^param int in_(\\w+) \\(used [-\\d ]+ read [-\\d ]+ "
                        r"write [-\\d ]+\\) connected$", re.M)
@@ -393,6 +387,13 @@ if blend != "-":
 report({"cases": CASES, "stats": stats, "folding": folding, "seconds": seconds, "socket_types": menus,
         "samples": 4, "pixels": layout.width * layout.height})
 '''
+
+# Cycles optimizes the shader groups on one thread from 5.1 on Linux. Before, OSL optimizes them
+# on every core and the threads' debug listings splice within lines whatever Blender's thread
+# count: a 5.0.1 listing of the menus had 8,343 spliced lines in 925,435 (4,865 with Blender's
+# threads fixed at 1), and one spliced line read as a whole "param int in_distribution (...)
+# connected". There the layers are not listed and the optimizer's statistics stand alone.
+SERIAL_LISTING = bpy.app.version >= (5, 1) and sys.platform.startswith("linux")
 
 FARM = '''
 import sys
@@ -420,7 +421,7 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
         blend = str(work / "menus.blend") if mode == "menu" else "-"
         # The layer listing (debug=1, about 9 s and 47 MB a run) for the menus and the varying
         # chain; the integers' statistics equal to the menus' say their folding is the same.
-        debug = ",debug=1" if mode != "int" else ""
+        debug = ",debug=1" if mode != "int" and SERIAL_LISTING else ""
         out = run_bpy_script(RENDER, work, str(ROOT), mode, str(work / "grid.exr"), blend,
                              env={"OSL_OPTIONS": "statistics:level=1" + debug}, timeout=300)
         runs[mode] = (out, images.read_image(work / "grid.exr"))
@@ -468,13 +469,14 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
     # Per shader layer: no enum survives optimization as a parameter read with menus (and the
     # integers' optimizer statistics are the menus', above); through the varying chain every
     # one is connected and read at run time.
-    print(f"[menus] enum parameters left after optimization: menu {menu['folding']}, "
-          f"varying {varying['folding']}")
-    zero = {"useparam": 0, "connected": 0}
-    assert set(menu["folding"]) == set(ENUMS)
-    assert menu["folding"] == {pid: zero for pid in ENUMS}
-    assert all(f["connected"] > 0 and f["useparam"] > 0 for f in varying["folding"].values()), \
-        varying["folding"]
+    if SERIAL_LISTING:
+        print(f"[menus] enum parameters left after optimization: menu {menu['folding']}, "
+              f"varying {varying['folding']}")
+        zero = {"useparam": 0, "connected": 0}
+        assert set(menu["folding"]) == set(ENUMS)
+        assert menu["folding"] == {pid: zero for pid in ENUMS}
+        assert all(f["connected"] > 0 and f["useparam"] > 0
+                   for f in varying["folding"].values()), varying["folding"]
 
     # The saved file with menus renders the same without the add-on.
     farm = tmp_path / "farm"
