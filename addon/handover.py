@@ -257,7 +257,7 @@ def _set_emission_sampling(material, paired: bool) -> None:
 
 
 def _without_radiance(records) -> list:
-    return [dataclasses.replace(r, radiance=(0.0, 0.0, 0.0)) for r in records]
+    return [dataclasses.replace(r, radiance=(0.0, 0.0, 0.0), texels=None) for r in records]
 
 
 def hand_over(scene, depsgraph=None, predict: bool = True) -> list[str]:

@@ -16,11 +16,22 @@ Record slots (RECORD_SIZE floats, world space):
   13     size: sun, 1 - cos(half-angle); sphere, radius
   14     power: guiding weight (strength times the colour's luminance), finite, > 0
   15     shape of a point or spot lamp: 1 a sphere, 0 a disk of that radius facing the shading
-         point (Blender's Soft Falloff, the default; Cycles' "is_sphere" off)
+         point (Blender's Soft Falloff, the default; Cycles' "is_sphere" off); a world spot
+         with texels (below): 1 + their offset in the shader's texel table (0: none)
   16-18  radiance: the lamp's radiance as Cycles emits it (RGB), 0 where not predicted (a
-         spot's cone, an area lamp's spread, a lamp with nodes or light linking, a world spot).
+         spot's cone, an area lamp's spread, a lamp with nodes or light linking). A world
+         spot's is its texels' mean, and the shader reads its texels instead.
          It drives the shaders' control variate (osl/nee.h), whose mean is 0 whatever it says:
          it too only moves noise.
+
+A world spot's texels (SpotTexels) are the equirectangular image's own pixels about the spot,
+times the Background's strength, which the shader reads as Cycles reads the image (osl/nee.h
+spot_radiance); their table's slots, from the record's offset:
+  0-1    the image's width and height
+  2-5    the box: first column, first row (row 0 at the bottom), columns, rows (columns wrap)
+  6      1 for Linear interpolation, 0 for Closest
+  7-15   the rotation taking a world direction to the image's lookup direction, row by row
+  16-    the box's linear RGB, row by row from its first row
 """
 from __future__ import annotations
 
@@ -29,12 +40,28 @@ from dataclasses import dataclass
 
 KINDS = ("sun", "sphere", "rect", "ellipse")
 RECORD_SIZE = 19
+SPOT_HEADER_SIZE = 16  # a world spot's texel slots before its RGB
 # Lamps beyond this many are not handed over (the shader loops over every record per sample).
 MAX_LAMPS = 128
 # A guiding weight is clamped to this, so that sums over 100 lamps stay finite in float.
 MAX_POWER = 1e20
 # Rec. 709 luminance weights, for the guiding weight of a coloured lamp.
 LUMINANCE = (0.2126, 0.7152, 0.0722)
+
+
+@dataclass(frozen=True)
+class SpotTexels:
+    """A world spot's pixels as the shader reads them (the table's slots: module docstring)."""
+    width: int
+    height: int
+    box: tuple  # (first column, first row, columns, rows)
+    linear: bool
+    rotation: tuple  # 9 floats, row by row
+    rgb: tuple  # columns * rows * 3 floats
+
+    def floats(self) -> list[float]:
+        return [float(self.width), float(self.height), *map(float, self.box),
+                float(self.linear), *map(float, self.rotation), *map(float, self.rgb)]
 
 
 @dataclass(frozen=True)
@@ -48,10 +75,13 @@ class LampRecord:
     power: float = 1.0
     is_sphere: bool = False
     radiance: tuple = (0.0, 0.0, 0.0)
+    texels: SpotTexels | None = None  # a world spot's pixels (suns only)
 
-    def floats(self) -> list[float]:
+    def floats(self, texel_offset: int = -1) -> list[float]:
+        """The record's slots; `texel_offset`, where its texels start in the shader's table."""
+        shape = float(self.is_sphere) if self.texels is None else float(texel_offset + 1)
         return ([float(KINDS.index(self.kind)), *self.position, *self.axis, *self.u, *self.v,
-                 self.size, self.power, float(self.is_sphere), *self.radiance])
+                 self.size, self.power, shape, *self.radiance])
 
 
 def _finite(values) -> bool:

@@ -203,19 +203,97 @@ def image_spots(image) -> list:
     return _IMAGE_CACHE[key]
 
 
+def _file_box(image, box):
+    """(rows, columns, 3) of a box (world_spots.texel_box) read from the image's file by the
+    OpenImageIO inside Blender, rows from the bottom; None where that cannot be done."""
+    path = _file_path(image)
+    if path is None:
+        return None
+    compat.expose_bundled_modules()
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        return None
+    reader = oiio.ImageInput.open(path)
+    if reader is None:
+        return None
+    try:
+        spec = reader.spec()
+        col0, row0, cols, rows = box
+        top = spec.height - row0 - rows  # the file's rows run from the top
+        pixels = reader.read_scanlines(0, 0, top, top + rows, 0, 0, 3, oiio.FLOAT)
+    finally:
+        reader.close()
+    if pixels is None or len(pixels) != rows:
+        return None
+    rgb = np.asarray(pixels)[::-1][:, (col0 + np.arange(cols)) % spec.width]
+    return _srgb_to_linear(rgb) if _is_srgb(image, as_stored=True) else rgb
+
+
+def _pixel_box(image, box):
+    """_file_box from Blender's copy of the pixels."""
+    width, height = image.size
+    flat = np.empty(width * height * image.channels, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    col0, row0, cols, rows = box
+    pixels = flat.reshape(height, width, image.channels)[row0:row0 + rows, :, :3]
+    rgb = pixels[:, (col0 + np.arange(cols)) % width]
+    return _srgb_to_linear(rgb) if _is_srgb(image, as_stored=False) else rgb
+
+
+def image_texels(image) -> list:
+    """Per spot of image_spots(image): (box, (rows, columns, 3) linear RGB, width, height) of
+    the pixels a lookup in its cone reads (world_spots.texel_box), or None; cached."""
+    key = ("texels", _image_key(image))
+    if key not in _IMAGE_CACHE:
+        found, had_data = [], image.has_data
+        try:
+            width, height = _image_size(image)
+            for axis, half, _ in image_spots(image):
+                box = world_spots.texel_box(axis, half, height, width)
+                rgb = None if box is None else _file_box(image, box)
+                if box is not None and rgb is None:
+                    rgb = _pixel_box(image, box)
+                found.append(None if rgb is None else (box, rgb, width, height))
+        except (RuntimeError, ValueError, MemoryError, OSError):
+            found = [None] * len(image_spots(image))
+        if not had_data and image.has_data:
+            image.buffers_free()
+        _IMAGE_CACHE[key] = found
+    return _IMAGE_CACHE[key]
+
+
+def _image_size(image):
+    """(width, height) of an image: its file's header where it has one (Image.size loads it)."""
+    path = _file_path(image)
+    if path is not None:
+        compat.expose_bundled_modules()
+        try:
+            import OpenImageIO as oiio
+            reader = oiio.ImageInput.open(path)
+        except ImportError:
+            reader = None
+        if reader is not None:
+            spec = reader.spec()
+            reader.close()
+            return spec.width, spec.height
+    return tuple(image.size)
+
+
 def _texture_spots(texture):
-    """Spots (axis, half-angle, power) of an Environment or Sky Texture, in its lookup space."""
+    """Spots (axis, half-angle, power) of an Environment or Sky Texture, in its lookup space,
+    and per spot its texels' (box, RGB, width, height) (image_texels) or None."""
     if texture.bl_idname == "ShaderNodeTexEnvironment":
         if texture.image is None or texture.projection != "EQUIRECTANGULAR":
-            return []
-        return image_spots(texture.image)
+            return [], []
+        return image_spots(texture.image), image_texels(texture.image)
     if texture.bl_idname == "ShaderNodeTexSky":
         if texture.sky_type not in compat.SKY_TYPES_WITH_SUN_DISC or not texture.sun_disc:
-            return []
+            return [], []
         half = 0.5 * float(texture.sun_size)
         axis = world_spots.sky_sun_direction(texture.sun_elevation, texture.sun_rotation)
-        return [(axis, half, SKY_SUN_POWER * float(texture.sun_intensity))]
-    return []
+        return [(axis, half, SKY_SUN_POWER * float(texture.sun_intensity))], [None]
+    return [], []
 
 
 def _background_records(background) -> list:
@@ -229,7 +307,12 @@ def _background_records(background) -> list:
     scale = float(strength.default_value)
     if not math.isfinite(scale) or scale <= 0.0:
         return []
-    return world_spots.spot_records(_texture_spots(texture), rotation, scale)
+    spots, found = _texture_spots(texture)
+    # Cubic and Smart lookups are predicted as Linear: a prediction off changes only the noise.
+    linear = getattr(texture, "interpolation", "Linear") != "Closest"
+    texels = [None if f is None else world_spots.box_texels(f[0], f[1], f[2], f[3], linear,
+                                                            rotation, scale) for f in found]
+    return world_spots.spot_records(spots, rotation, scale, texels)
 
 
 def world_records(scene) -> list:

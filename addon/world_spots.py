@@ -13,10 +13,11 @@ v = 0 (the bottom, Blender's pixel order).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from .lamps import LUMINANCE, sun_record
+from .lamps import LUMINANCE, SpotTexels, sun_record
 
 # At most this many spots per world texture (each costs the shader a record per sample).
 MAX_SPOTS = 2
@@ -26,6 +27,10 @@ SPOT_CONTRAST = 20.0
 MIN_SPOT_SHARE = 0.05
 # Bright pixels this far from a spot's brightest pixel are not part of it (a spot is small).
 MAX_SPOT_HALF_ANGLE = math.radians(10.0)
+# A spot's own pixels go to the shaders (their prediction of its light, osl/nee.h) when the box
+# a lookup inside its cone may read has at most this many a side (40 x 40 RGB: 4,800 floats in
+# the shader's text); a larger spot is aimed at and controlled as before.
+MAX_TEXELS = 40
 
 
 def equirect_direction(u, v) -> np.ndarray:
@@ -126,6 +131,43 @@ def _group_spots(rows, cols, lum, omega, height, width, total, max_spots):
     return spots
 
 
+def texel_box(axis, half: float, height: int, width: int):
+    """(first column, first row, columns, rows) of the pixels that a Closest or Linear lookup
+    (Cycles' interp_closest, interp_linear) of a direction inside the cone (axis, half-angle)
+    may read, rows from the bottom, columns wrapping around; None where the cone holds a pole
+    or the box has over MAX_TEXELS a side."""
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    elevation = math.asin(min(1.0, max(-1.0, float(a[2]))))
+    if not 0.0 < half < math.pi / 2 - abs(elevation):
+        return None
+    # v = 1/2 + elevation / pi; the cone's widest longitude: sin(dphi) = sin(half) / cos(elevation)
+    y_lo, y_hi = ((0.5 + (elevation + s * half) / math.pi) * height for s in (-1.0, 1.0))
+    dphi = math.asin(min(1.0, math.sin(half) / math.cos(elevation)))
+    u = 0.5 - math.atan2(float(a[1]), float(a[0])) / (2.0 * math.pi)
+    x_lo, x_hi = ((u + s * dphi / (2.0 * math.pi)) * width for s in (-1.0, 1.0))
+    # Linear reads floor(x - 1/2) and the next; Closest floor(x): both within these bounds.
+    row0 = max(0, math.floor(y_lo - 0.5))
+    rows = min(height - 1, math.floor(y_hi + 0.5)) - row0 + 1
+    col0 = math.floor(x_lo - 0.5)
+    cols = math.floor(x_hi + 0.5) - col0 + 1
+    if rows > MAX_TEXELS or cols > min(MAX_TEXELS, width):
+        return None
+    return col0 % width, row0, cols, rows
+
+
+def box_texels(box, rgb, width: int, height: int, linear: bool, rotation=None,
+               scale: float = 1.0):
+    """SpotTexels of the box's (rows, columns, 3) linear `rgb` times `scale`, or None where a
+    value is not finite or none is positive."""
+    rgb = np.asarray(rgb, dtype=np.float64) * scale
+    if rgb.shape != (box[3], box[2], 3) or not np.isfinite(rgb).all() or not (rgb > 0).any():
+        return None
+    rotation = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
+    return SpotTexels(width, height, tuple(int(b) for b in box), bool(linear),
+                      tuple(rotation.reshape(-1)), tuple(np.maximum(rgb, 0.0).reshape(-1)))
+
+
 def sky_sun_direction(elevation: float, rotation: float) -> np.ndarray:
     """Direction toward the Sky Texture's sun disc (Cycles' svm sky: spherical_to_direction(
     elevation - pi/2, rotation' - pi/2), rotation' = 2 pi - rotation as Cycles patches it)."""
@@ -133,12 +175,14 @@ def sky_sun_direction(elevation: float, rotation: float) -> np.ndarray:
     return np.array([ce * math.sin(rotation), ce * math.cos(rotation), math.sin(elevation)])
 
 
-def spot_records(spots, rotation=None, scale: float = 1.0) -> list:
+def spot_records(spots, rotation=None, scale: float = 1.0, texels=None) -> list:
     """LampRecords (kind "sun") of spots (axis, half-angle, power) found in texture space:
     `rotation` (3x3) maps a world direction to the texture's lookup direction (None: the same),
-    `scale` multiplies the power (the Background's strength)."""
+    `scale` multiplies the power (the Background's strength). `texels`, one per spot, SpotTexels
+    (of the strength's radiance) or None: a spot with texels gets their mean as its predicted
+    radiance, which the shaders read from them."""
     records = []
-    for axis, half, power in spots:
+    for i, (axis, half, power) in enumerate(spots):
         d = np.asarray(axis, dtype=float)
         if rotation is not None:
             d = np.asarray(rotation, dtype=float).T @ d  # a rotation's inverse
@@ -146,6 +190,10 @@ def spot_records(spots, rotation=None, scale: float = 1.0) -> list:
         if not math.isfinite(p) or p <= 0.0:
             continue
         record = sun_record(tuple(d), 2.0 * half, min(p, 1e20))
+        spot = None if texels is None else texels[i]
+        if record is not None and spot is not None:
+            mean = np.asarray(spot.rgb).reshape(-1, 3).mean(0)
+            record = replace(record, texels=spot, radiance=tuple(np.minimum(mean, 1e20)))
         if record is not None:
             records.append(record)
     return records

@@ -9,6 +9,7 @@ of it), bad lamp values that reach the shader (NaN, negative, zero size), and OS
 that drift from numpy's.
 Tolerances: Monte Carlo, from the samples' own standard errors (5 sigma), and analytic
 solid angles."""
+import dataclasses
 import math
 
 import numpy as np
@@ -224,6 +225,24 @@ def test_the_osl_table_holds_every_record_and_nothing_without_lamps():
     assert len(shaders.lamp_table_block(many * 2).split("{")[-1].split(",")) == \
         records_mod.MAX_LAMPS * records_mod.RECORD_SIZE
     assert all(len(r.floats()) == records_mod.RECORD_SIZE for r in LAMPS)
+
+
+def test_world_spot_texels_follow_the_table_only_where_predicted():
+    """A world spot's texels go into their own table, the record's slot 15 pointing at them
+    (1 + offset), and only with a predicted radiance (a withheld prediction keeps no texels)."""
+    texels = records_mod.SpotTexels(8, 4, (1, 2, 2, 1), True, tuple(np.eye(3).reshape(-1)),
+                                    (1.0, 2.0, 3.0, 4.0, 5.0, 6.0))
+    spot = dataclasses.replace(records_mod.sun_record((0, 0, 1), 0.1, 5.0), texels=texels,
+                               radiance=(2.5, 3.5, 4.5))
+    lamp = records_mod.sun_record((1, 0, 0), 0.1, 1.0)
+    block = shaders.lamp_table_block([lamp, spot, spot])
+    assert "#define MFL_SPOT_TEXELS 1" in block
+    assert f"float table[{2 * len(texels.floats())}]" in block
+    lamp_table = [float(x) for x in block.split("{")[2].split("}")[0].split(",")]
+    assert [lamp_table[15 + k * records_mod.RECORD_SIZE] for k in range(3)] == \
+        [0.0, 1.0, 1.0 + len(texels.floats())]
+    withheld = dataclasses.replace(spot, radiance=(0.0, 0.0, 0.0))
+    assert "#define MFL_SPOT_TEXELS 0" in shaders.lamp_table_block([lamp, withheld])
 
 
 def test_osl_constants_are_the_numpy_ones():
