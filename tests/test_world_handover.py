@@ -213,8 +213,8 @@ def test_the_shaders_read_a_world_spots_radiance_as_cycles_draws_it(interpolatio
     # 6 degrees across: every pixel's rays within the spot's cone (4.8 degrees about its axis),
     # where the shaders predict its light; the view holds sky texels of the box too.
     _look_at(scene, record.axis, 6.0, 48)
-    # The world seen through the sphere made transparent: the same camera rays as the probe's
-    # (a render without the sphere jittered them differently: 5e-4 off in Linear).
+    # The world seen through the sphere made transparent: the two renders differ only in the
+    # sphere's material.
     clear, tree, output = harness.new_material("clear")
     tree.links.new(tree.nodes.new("ShaderNodeBsdfTransparent").outputs[0],
                    output.inputs["Surface"])
