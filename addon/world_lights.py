@@ -134,10 +134,9 @@ def _is_srgb(image, as_stored: bool) -> bool:
     return srgb and (as_stored or not image.is_float)
 
 
-def _file_bands(image):
-    """(height, width, bands) of an image read from its file by the OpenImageIO inside Blender,
-    one band of rows at a time (rows counted from the bottom, as Blender stores them); None where
-    that cannot be done (no OpenImageIO, a packed, generated, edited or missing image)."""
+def _open_file(image):
+    """(OpenImageIO module, reader) of an image's file by the OpenImageIO inside Blender, or
+    None (no OpenImageIO, a packed, generated, edited or missing image)."""
     path = _file_path(image)
     if path is None:
         return None
@@ -147,8 +146,18 @@ def _file_bands(image):
     except ImportError:
         return None
     reader = oiio.ImageInput.open(path)
-    if reader is None:
+    return None if reader is None else (oiio, reader)
+
+
+def _file_bands(image):
+    """(height, width, bands) of an image read from its file by the OpenImageIO inside Blender,
+    one band of rows at a time (rows counted from the bottom, as Blender stores them); None where
+    that cannot be done (_open_file)."""
+    opened = _open_file(image)
+    if opened is None:
         return None
+    oiio, reader = opened
+    path = _file_path(image)
     spec = reader.spec()
     if spec.nchannels < 3 or spec.width * spec.height == 0 or spec.depth > 1:
         reader.close()
@@ -206,17 +215,10 @@ def image_spots(image) -> list:
 def _file_box(image, box):
     """(rows, columns, 3) of a box (world_spots.texel_box) read from the image's file by the
     OpenImageIO inside Blender, rows from the bottom; None where that cannot be done."""
-    path = _file_path(image)
-    if path is None:
+    opened = _open_file(image)
+    if opened is None:
         return None
-    compat.expose_bundled_modules()
-    try:
-        import OpenImageIO as oiio
-    except ImportError:
-        return None
-    reader = oiio.ImageInput.open(path)
-    if reader is None:
-        return None
+    oiio, reader = opened
     try:
         spec = reader.spec()
         col0, row0, cols, rows = box
@@ -265,19 +267,12 @@ def image_texels(image) -> list:
 
 def _image_size(image):
     """(width, height) of an image: its file's header where it has one (Image.size loads it)."""
-    path = _file_path(image)
-    if path is not None:
-        compat.expose_bundled_modules()
-        try:
-            import OpenImageIO as oiio
-            reader = oiio.ImageInput.open(path)
-        except ImportError:
-            reader = None
-        if reader is not None:
-            spec = reader.spec()
-            reader.close()
-            return spec.width, spec.height
-    return tuple(image.size)
+    opened = _open_file(image)
+    if opened is None:
+        return tuple(image.size)
+    spec = opened[1].spec()
+    opened[1].close()
+    return spec.width, spec.height
 
 
 def _texture_spots(texture):
