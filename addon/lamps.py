@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 KINDS = ("sun", "sphere", "rect", "ellipse")
 RECORD_SIZE = 19
-SPOT_HEADER_SIZE = 16  # a world spot's texel slots before its RGB
+SPOT_HEADER_SIZE = 16  # a world spot's texel slots before its RGB (osl/nee.h MFL_SPOT_HEADER)
 # Lamps beyond this many are not handed over (the shader loops over every record per sample).
 MAX_LAMPS = 128
 # A guiding weight is clamped to this, so that sums over 100 lamps stay finite in float.
@@ -60,8 +60,10 @@ class SpotTexels:
     rgb: tuple  # columns * rows * 3 floats
 
     def floats(self) -> list[float]:
-        return [float(self.width), float(self.height), *map(float, self.box),
-                float(self.linear), *map(float, self.rotation), *map(float, self.rgb)]
+        header = [float(self.width), float(self.height), *map(float, self.box),
+                  float(self.linear), *map(float, self.rotation)]
+        assert len(header) == SPOT_HEADER_SIZE
+        return header + [float(x) for x in self.rgb]
 
 
 @dataclass(frozen=True)

@@ -232,15 +232,18 @@ def _file_box(image, box):
     return _srgb_to_linear(rgb) if _is_srgb(image, as_stored=True) else rgb
 
 
-def _pixel_box(image, box):
-    """_file_box from Blender's copy of the pixels."""
+def _pixel_box(image, box, pixels):
+    """_file_box from Blender's copy of the pixels, (H, W, channels), copied once per image."""
+    col0, row0, cols, rows = box
+    rgb = pixels[row0:row0 + rows, (col0 + np.arange(cols)) % pixels.shape[1], :3]
+    return _srgb_to_linear(rgb) if _is_srgb(image, as_stored=False) else rgb
+
+
+def _blender_pixels(image) -> np.ndarray:
     width, height = image.size
     flat = np.empty(width * height * image.channels, dtype=np.float32)
     image.pixels.foreach_get(flat)
-    col0, row0, cols, rows = box
-    pixels = flat.reshape(height, width, image.channels)[row0:row0 + rows, :, :3]
-    rgb = pixels[:, (col0 + np.arange(cols)) % width]
-    return _srgb_to_linear(rgb) if _is_srgb(image, as_stored=False) else rgb
+    return flat.reshape(height, width, image.channels)
 
 
 def image_texels(image) -> list:
@@ -248,14 +251,15 @@ def image_texels(image) -> list:
     the pixels a lookup in its cone reads (world_spots.texel_box), or None; cached."""
     key = ("texels", _image_key(image))
     if key not in _IMAGE_CACHE:
-        found, had_data = [], image.has_data
+        found, had_data, pixels = [], image.has_data, None
         try:
             width, height = _image_size(image)
             for axis, half, _ in image_spots(image):
                 box = world_spots.texel_box(axis, half, height, width)
                 rgb = None if box is None else _file_box(image, box)
                 if box is not None and rgb is None:
-                    rgb = _pixel_box(image, box)
+                    pixels = _blender_pixels(image) if pixels is None else pixels
+                    rgb = _pixel_box(image, box, pixels)
                 found.append(None if rgb is None else (box, rgb, width, height))
         except (RuntimeError, ValueError, MemoryError, OSError):
             found = [None] * len(image_spots(image))

@@ -45,7 +45,7 @@ color spot_texel(int o, int ix, int iy)
     int cols = int(spot_datum(o + 4));
     if (c >= cols || r < 0 || r >= int(spot_datum(o + 5)))
         return color(0.0);
-    int k = o + 16 + 3 * (r * cols + c);
+    int k = o + MFL_SPOT_HEADER + 3 * (r * cols + c);
     return color(spot_datum(k), spot_datum(k + 1), spot_datum(k + 2));
 }
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from addon import world_spots as ws
+from addon.lamps import SPOT_HEADER_SIZE
 
 W, H = 128, 64
 
@@ -148,7 +149,7 @@ def test_texels_carry_the_strength_and_refuse_bad_pixels():
     rgb = np.full((3, 4, 3), 2.0)
     texels = ws.box_texels(box, rgb, W, H, linear=True, scale=1.5)
     assert texels.box == box and texels.linear and np.allclose(texels.rgb, 3.0)
-    assert len(texels.floats()) == 16 + 3 * 4 * 3
+    assert len(texels.floats()) == SPOT_HEADER_SIZE + 3 * 4 * 3
     (record,) = ws.spot_records([((0.6, 0.48, 0.64), 0.05, 1.0)], texels=[texels])
     assert record.texels is texels and np.allclose(record.radiance, 3.0)
     rgb[0, 0, 0] = np.nan
