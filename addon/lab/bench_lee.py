@@ -115,21 +115,12 @@ def cost_rows():
     ]
 
 
-def _set_border(scene, rows: int, row: int):
-    r = scene.render
-    r.use_border = True
-    r.use_crop_to_border = False
-    r.border_min_x, r.border_max_x = 0.0, 1.0
-    r.border_max_y = 1.0 - row / rows
-    r.border_min_y = 1.0 - (row + 1) / rows
-
-
 def shader_cost(samples=(16, 144), cell_px: int = 32, repeats: int = 3,
                 roughness=COST_ROUGHNESS, progress=None) -> dict:
     """Render time per sample of the Lee shader against the Cook-Torrance shader (gold, white
     furnace, one row of spheres per shader, roughness `roughness`), measured side by side:
     ONE scene holds every row (persistent data; scene sync and OSL JIT are done once before
-    timing); each row is rendered alone through a render border at the two sample counts
+    timing); each row is rendered alone (harness.render_row_alone) at the two sample counts
     `samples`, rows interleaved (order reversed on odd repeats). Seconds per sample of a row =
     the slope (t(hi) - t(lo)) / (hi - lo), which cancels the per-render overhead (EXR
     write/read). Everything is taken per repeat (rows rendered moments apart, so a change in
@@ -155,7 +146,7 @@ def shader_cost(samples=(16, 144), cell_px: int = 32, repeats: int = 3,
         if rep % 2:
             order.reverse()
         for r, (label, _, _) in order:
-            _set_border(scene, len(rows), r)
+            harness.render_row_alone(scene, layout, r)
             for spp in (lo, hi):
                 done += 1
                 if progress:

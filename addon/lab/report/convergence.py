@@ -17,7 +17,7 @@ from .references import reference_image, relative_rmse
 from .rows import (RATIO_TO, SELF_REFERENCE_FACTOR, eval_is_fast, self_referenced, specs_for,
                    twin)
 from .lights import cone_radiance
-from .scenes import build_env_scene, calibrate_sun, set_border
+from .scenes import build_env_scene, calibrate_sun
 
 
 def compute(cfg, rows, tables, progress, notes, out) -> dict:
@@ -77,15 +77,15 @@ def measure_env(cfg, env_key, rows, tables, progress, sun_cal, out, count):
 
 
 def render_rows(cfg, env_key, rows, scene, layout, reference, progress, count):
-    """Each row alone through a render border at every sample count: ({row key: [(samples,
-    seconds, relative RMSE)]}, the grid at the largest count)."""
+    """Each row alone (a render border, the other rows hidden) at every sample count: ({row
+    key: [(samples, seconds, relative RMSE)]}, the grid at the largest count)."""
     from .. import harness
 
     index, _, mu = layout.pixel_geometry()
     series = {}
     finals = np.zeros((layout.height, layout.width, 3))
     for r, row in enumerate(rows):
-        set_border(scene, layout, r)
+        harness.render_row_alone(scene, layout, r)
         sel = (index >= r * layout.cols) & (index < (r + 1) * layout.cols) & (mu > MU_MIN_RMSE)
         band = slice(r * layout.cell_px, (r + 1) * layout.cell_px)
         if self_referenced(row, env_key):

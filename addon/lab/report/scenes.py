@@ -112,15 +112,6 @@ def calibrate_sun(progress) -> dict:
     return result
 
 
-def set_border(scene, layout, row):
-    r = scene.render
-    r.use_border = True
-    r.use_crop_to_border = False
-    r.border_min_x, r.border_max_x = 0.0, 1.0
-    r.border_max_y = 1.0 - row / layout.rows
-    r.border_min_y = 1.0 - (row + 1) / layout.rows
-
-
 def build_env_scene(rows, cfg, env_key, device="CPU", sun_cal=None):
     """One scene per environment: row r of the grid is rows[r], one sphere per roughness."""
     from .. import harness
