@@ -208,7 +208,7 @@ def render_row_alone(scene, layout: GridLayout, row: int):
     they would block the shaders' view of a lamp that the light itself reaches, and leave its
     light to the rare delta ray that hits it (docs/light-sampling.md, "What trace() sees").
     Moved, not hidden: Cycles drops a hidden object's shaders and compiles them again when it
-    returns (2-4 s a row, measured); a move only refits the BVH."""
+    returns (up to 4 s a row, measured); a move only refits the BVH."""
     r = scene.render
     r.use_border = True
     r.use_crop_to_border = False
