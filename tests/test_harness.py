@@ -75,6 +75,30 @@ def test_a_row_rendered_alone_is_out_of_the_other_rows_trace():
     assert np.all(alone[index == 1] == 0.0)  # outside the border: not rendered
 
 
+def test_values_read_per_object_render_as_the_same_values_in_value_nodes():
+    """harness.attribute_model_material (the stress grid under the sun) gives the pixels of
+    harness.linked_model_material for the same values: it would catch an attribute that does
+    not reach the shader (read as 0) and pass a stress grid that tested nothing."""
+    values = {"roughness": 0.4, "n": (0.2, 0.9, 1.4), "k": (3.0, 2.4, 1.9)}
+    enums = {"fresnel_type": "conductor"}
+    images = []
+    for per_object in (False, True):
+        harness.new_scene()
+        if per_object:
+            mat = harness.attribute_model_material("walter_reflection", enums, list(values), "a")
+        else:
+            mat = harness.linked_model_material("walter_reflection", {**enums, **values}, "v")
+        layout = grid.GridLayout(1, 1, cell_px=32)
+        scene = harness.build_grid_scene(layout, [mat], grid.GRADIENT, 4, 3)
+        if per_object:
+            harness.set_object_values(scene.objects[harness.sphere_name(0)], values)
+        images.append(harness.render(scene)[0])
+    index, _, _ = layout.pixel_geometry()
+    a, b = (im[index == 0][:, :3] for im in images)
+    assert a.mean() > 0.05
+    np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-6)
+
+
 def test_compile_guard_fails_loudly_on_a_broken_shader(monkeypatch):
     harness.new_scene()
     model = MODELS["walter_reflection"]

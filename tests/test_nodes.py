@@ -63,9 +63,18 @@ def input_sockets(group):
     return [s for s in group.interface.items_tree if getattr(s, "in_out", None) == "INPUT"]
 
 
-@pytest.fixture()
-def groups():
+@pytest.fixture(scope="module")
+def _groups_built_fresh():
+    """Every model's group built once, in a fresh file (each build compiles its shader)."""
     harness.new_scene()
+    for model_id in MODELS:
+        nodes.ensure_group(model_id)
+
+
+@pytest.fixture()
+def groups(_groups_built_fresh):
+    """The groups of _groups_built_fresh; rebuilt only where a test in between reset the file
+    or left a group invalid (nodes.ensure_group checks)."""
     return {model_id: nodes.ensure_group(model_id) for model_id in MODELS}
 
 

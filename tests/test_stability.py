@@ -78,13 +78,15 @@ def test_osl_stress_grid_has_no_bad_pixel(env_key):
     controls and the control variate (the lamp is handed over and predicted), the code paths
     the gradient world alone never takes. The sun's grid holds the cases that may read the lamp
     (the light-sampled estimator, above the mirror's roughness: stability.stress_cases) and
-    leaves the others to the gradient's."""
+    leaves the others to the gradient's. The gradient's values are constants (folded into each
+    case's compiled shader), the sun's are read per object as the shader runs (a third of the
+    shaders to compile: 33 for 110 cases): both ways a value can reach the shader."""
     pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
     from addon.lab.report.scenes import add_sun
 
     sun = env_key == "sun"
     result = stability.osl_stress_grid(env_key, quick=True, cell_px=12,
                                        sun=add_sun if sun else None,
-                                       lamp_paths=sun)
+                                       lamp_paths=sun, per_object=sun)
     assert result.spheres >= 40 and result.pixels > 1000
     assert (result.nan, result.inf, result.negative) == (0, 0, 0), result.bad

@@ -285,6 +285,37 @@ def linked_model_material(model_id: str, values: dict, name: str):
     return material
 
 
+ATTRIBUTE_PREFIX = "mfl_"  # attribute_model_material: the objects' custom property names
+
+
+def attribute_model_material(model_id: str, enums: dict, keys, name: str):
+    """A model's material whose numeric inputs `keys` are read per object (an Attribute node of
+    type Object: the custom property ATTRIBUTE_PREFIX + key, set with set_object_values), so one
+    material, one shader group, serves objects with different values, and any value reaches the
+    shader unclamped by the sockets and unknown to the shader optimizer. Enums are set on the
+    group node (validated)."""
+    from ..catalog import COLOR, MODELS
+
+    model = MODELS[model_id]
+    material, tree, output = new_material(name)
+    group = nodes.add_group_node(tree, model_id, enums)
+    for key in keys:
+        source = tree.nodes.new("ShaderNodeAttribute")
+        source.attribute_type = "OBJECT"
+        source.attribute_name = ATTRIBUTE_PREFIX + key
+        out = source.outputs["Vector" if model.param(key).kind == COLOR else "Fac"]
+        tree.links.new(out, group.inputs[model.param(key).label])
+    tree.links.new(group.outputs["BSDF"], output.inputs["Surface"])
+    return material
+
+
+def set_object_values(obj, values: dict):
+    """The values an attribute_model_material reads on `obj` (floats, or colours as triples)."""
+    for key, value in values.items():
+        obj[ATTRIBUTE_PREFIX + key] = tuple(map(float, value)) if hasattr(value, "__len__") \
+            else float(value)
+
+
 def osl_material(source: str, name: str):
     """A material made of a raw OSL script (used for Cycles' native closures in tests)."""
     material, tree, output = new_material(name)

@@ -447,6 +447,28 @@ def linked_material(model_id: str, values: dict, name: str):
     return make
 
 
+def numeric_values(model_id: str, values: dict) -> dict:
+    """The values that are not menu choices (floats and colours)."""
+    return {k: v for k, v in values.items() if MODELS[model_id].param(k).kind != ENUM}
+
+
+def per_object_materials(cases) -> list:
+    """One material per case, shared by the cases of the same model and menu choices, whose
+    numeric inputs are read per object (harness.attribute_model_material)."""
+    from . import harness
+
+    made, mats = {}, []
+    for model_id, values in cases:
+        enums = {k: v for k, v in values.items() if k not in numeric_values(model_id, values)}
+        key = (model_id, tuple(sorted(enums.items())),
+               tuple(sorted(numeric_values(model_id, values))))
+        if key not in made:
+            made[key] = harness.attribute_model_material(model_id, enums, key[2],
+                                                         f"stress {len(made)}")
+        mats.append(made[key])
+    return mats
+
+
 @dataclass
 class StressResult:
     env: str
@@ -481,10 +503,14 @@ def count_bad_pixels(layout, image, cases) -> tuple:
 
 def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int = 16,
                     quick: bool = False, cols: int = 12, seed: int = 7,
-                    sun=None, lamp_paths: bool = False) -> StressResult:
+                    sun=None, lamp_paths: bool = False,
+                    per_object: bool = False) -> StressResult:
     """Render the stress cases through the OSL shaders and count bad pixels. `env_name` is a
     key of grid.ENVIRONMENTS, or 'sun' with `sun` a callable(scene) adding the light;
-    `lamp_paths` keeps the cases that may read it (stress_cases)."""
+    `lamp_paths` keeps the cases that may read it (stress_cases). The values come from Value
+    nodes (constants, which Cycles and OSL's optimizer fold into one shader group per case),
+    or with `per_object` from each sphere's own attributes (read as the shader runs, one
+    group per model and menu choice: a third of the groups to compile under the sun)."""
     from .. import nodes
     from . import grid, harness
 
@@ -496,11 +522,15 @@ def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int 
         except Exception as exc:  # noqa: BLE001 - a shader that does not compile is reported
             skipped[m] = f"does not compile: {exc}"
     cases = stress_cases(quick, [m for m in MODELS if m not in skipped], lamp_paths)
-    makers = [linked_material(m, v, f"stress {i}") for i, (m, v) in enumerate(cases)]
     env = grid.ENVIRONMENTS.get(env_name) or grid.Environment(env_name, 0.05)
     layout = grid.GridLayout(rows=-(-len(cases) // cols), cols=cols, cell_px=cell_px)
-    mats = [make() for make in makers]
+    mats = per_object_materials(cases) if per_object else \
+        [linked_material(m, v, f"stress {i}")() for i, (m, v) in enumerate(cases)]
     harness.build_grid_scene(layout, mats, env, samples, seed)
+    if per_object:
+        for i, (model_id, values) in enumerate(cases):
+            harness.set_object_values(scene.objects[harness.sphere_name(i)],
+                                      numeric_values(model_id, values))
     if sun is not None:
         sun(scene)
     image, seconds = harness.render(scene)
