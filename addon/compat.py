@@ -32,6 +32,10 @@ METALLIC_BSDF = hasattr(bpy.types, "ShaderNodeBsdfMetallic")
 # spheres): black in 4.2 (Principled) and 5.0 (Metallic), a round-axis frame in 5.3 as our
 # shaders build (measured; 5.1 and 5.2 not). Before it the native branch drops the anisotropy.
 NATIVE_ANISOTROPY = bpy.app.version >= (5, 3, 0)
+# An Attribute node of type Object reads the object's custom property on the lab's point-cloud
+# spheres from 4.5 (4.5.15, 5.0.1, 5.3.0); 4.2.23 rendered them as if every value were unset
+# (measured; 4.3 and 4.4 not). Only the lab's per-object stress grid relies on it.
+OBJECT_ATTRIBUTES_ON_POINT_CLOUDS = bpy.app.version >= (4, 5, 0)
 
 
 def expose_bundled_modules() -> None:

@@ -79,6 +79,10 @@ def test_values_read_per_object_render_as_the_same_values_in_value_nodes():
     """harness.attribute_model_material (the stress grid under the sun) gives the pixels of
     harness.linked_model_material for the same values: it would catch an attribute that does
     not reach the shader (read as 0) and pass a stress grid that tested nothing."""
+    if not compat.OBJECT_ATTRIBUTES_ON_POINT_CLOUDS:
+        with pytest.raises(RuntimeError, match="does not pass object attributes"):
+            harness.attribute_model_material("walter_reflection", {}, ["roughness"], "a")
+        return
     values = {"roughness": 0.4, "n": (0.2, 0.9, 1.4), "k": (3.0, 2.4, 1.9)}
     enums = {"fresnel_type": "conductor"}
     images = []

@@ -296,6 +296,9 @@ def attribute_model_material(model_id: str, enums: dict, keys, name: str):
     group node (validated)."""
     from ..catalog import COLOR, MODELS
 
+    if not compat.OBJECT_ATTRIBUTES_ON_POINT_CLOUDS:
+        raise RuntimeError(f"Blender {bpy.app.version_string} does not pass object attributes "
+                           "to the spheres' shaders (4.5 and later do)")
     model = MODELS[model_id]
     material, tree, output = new_material(name)
     group = nodes.add_group_node(tree, model_id, enums)

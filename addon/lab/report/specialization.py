@@ -67,7 +67,7 @@ def compute(cfg, rows, tables, progress, notes, out) -> dict:
     samples, size, repeats = {"full": (64, (240, 180), 3), "quick": (16, (160, 120), 2)}.get(
         cfg.mode, (4, (48, 36), 1))
     results = []
-    for label, preset in CASES:
+    for label, preset in CASES[:1] if cfg.mode == "smoke" else CASES:  # smoke: one compile
         runs = {False: [], True: []}
         for _ in range(repeats):
             for specialized in (False, True):
