@@ -149,15 +149,16 @@ color lamps_light(point P, vector dir)
 // or wide against the lobe (its half-angle at least MFL_NEE_LOBE_SHARE times the lobe's alpha:
 // the model's value then varies across it; alpha 0 where the estimate carries a small part of
 // the lobe, which four directions would not repay), or the model's value toward it is itself an
-// estimate (stochastic: Heitz 2016's walk, Lee's asymmetric grooves), else 1. The shader's random numbers are white noise (cycles.h rng), where
-// Cycles stratifies its own light samples over a pixel's samples: on the look-dev Suzanne's area
-// lamp a Lambertian's light through this estimate, one direction per sample, had 8.8 times the
-// variance of Cycles' Diffuse BSDF (docs/light-sampling-measurements.md, sec. 16). Across a
-// narrow lamp a closed form hardly changes, and more directions would only cost.
+// estimate (stochastic: Heitz 2016's walk, Lee's asymmetric grooves), else 1. The shader's random
+// numbers are white noise (cycles.h rng), where Cycles stratifies its own light samples over a
+// pixel's samples: on the look-dev Suzanne's area lamp a Lambertian's light through this
+// estimate, one direction per sample, had 8.8 times the variance of Cycles' Diffuse BSDF
+// (docs/light-sampling-measurements.md, sec. 16). Across a lamp narrow against both a closed
+// form hardly changes, and more directions would only cost.
 #define MFL_NEE_GRID 2
 // A 4-degree sun on a roughness-0.2 Cook-Torrance sphere (alpha 0.04): one direction per hit
-// left its highlight's pixels 0.66 noise per sample (docs/light-sampling-measurements.md,
-// sec. 19).
+// left its highlight's pixels about 0.6 relative noise per sample
+// (docs/light-sampling-measurements.md, sec. 19).
 #define MFL_NEE_LOBE_SHARE 0.5
 
 int nee_grid(point P, normal Ng, int stochastic, float alpha)

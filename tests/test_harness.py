@@ -51,14 +51,15 @@ def test_seeds_rendered_in_one_scene_are_the_separate_renders():
 
 # Emits 1 where trace() toward the next row (-y, rising 0.02) hits something, else 0.5.
 SEES_NEXT_ROW = ('#include "stdcycles.h"\nshader seen(output closure color BSDF = 0) {\n'
-                 '    BSDF = (trace(P, normalize(vector(0, -1, 0.02))) ? 1.0 : 0.5) * emission();\n}')
+                 '    vector next_row = normalize(vector(0, -1, 0.02));\n'
+                 '    BSDF = (trace(P, next_row) ? 1.0 : 0.5) * emission();\n}')
 
 
 def test_a_row_rendered_alone_is_out_of_the_other_rows_trace():
-    """OSL's trace() sees the grid's spheres though they are invisible to every secondary ray
-    (1 in the full grid where the ray meets the next row); harness.render_row_alone takes the other rows out of its way
-    (all 0.5). It would catch the report rendering a row with the others in the way of the
-    shaders' view of a lamp: the light-sampled rows under the point and area lamps then found
+    """OSL's trace() sees the grid's spheres though they are invisible to every secondary ray (1 in
+    the full grid where the ray meets the next row); harness.render_row_alone takes the other rows
+    out of its way (all 0.5). It would catch the report rendering a row with the others in the way
+    of the shaders' view of a lamp: the light-sampled rows under the point and area lamps then found
     the lamp only by rare, heavy delta hits (relative RMSE 0.2-0.3 at 1024 samples)."""
     layout = grid.GridLayout(3, 1, cell_px=16)
     harness.new_scene()

@@ -201,14 +201,14 @@ def sphere_name(index: int) -> str:
 
 
 def render_row_alone(scene, layout: GridLayout, row: int):
-    """Render only grid row `row` (0 at the top): a render border around it, and the other
-    rows' spheres moved far below (OUT_OF_THE_WAY_Z), out of the band's camera rays and of
-    every ray toward the report's lamps, which all lie above the grid. The other spheres are invisible to Cycles' own secondary rays, but
-    OSL's trace() sees every object (it traces with all visibility flags), so from a far row
-    they would block the shaders' view of a lamp that the light itself reaches, and leave its
-    light to the rare delta ray that hits it (docs/light-sampling.md, "What trace() sees").
-    Moved, not hidden: Cycles drops a hidden object's shaders and compiles them again when it
-    returns (up to 4 s a row, measured); a move only refits the BVH."""
+    """Render only grid row `row` (0 at the top): a render border around it, and the other rows'
+    spheres moved far below (OUT_OF_THE_WAY_Z), out of the band's camera rays and of every ray
+    toward the report's lamps, which all lie above the grid. The other spheres are invisible to
+    Cycles' own secondary rays, but OSL's trace() sees every object (it traces with all visibility
+    flags), so from a far row they would block the shaders' view of a lamp that the light itself
+    reaches, and leave its light to the rare delta ray that hits it (docs/light-sampling.md, "What
+    trace() sees"). Moved, not hidden: Cycles drops a hidden object's shaders and compiles them
+    again when it returns (up to 4 s a row, measured); a move only refits the BVH."""
     r = scene.render
     r.use_border = True
     r.use_crop_to_border = False

@@ -525,7 +525,7 @@ def osl_stress_grid(env_name: str = "gradient", samples: int = 16, cell_px: int 
     env = grid.ENVIRONMENTS.get(env_name) or grid.Environment(env_name, 0.05)
     layout = grid.GridLayout(rows=-(-len(cases) // cols), cols=cols, cell_px=cell_px)
     mats = per_object_materials(cases) if per_object else \
-        [linked_material(m, v, f"stress {i}")() for i, (m, v) in enumerate(cases)]
+        [harness.linked_model_material(m, v, f"stress {i}") for i, (m, v) in enumerate(cases)]
     harness.build_grid_scene(layout, mats, env, samples, seed)
     if per_object:
         for i, (model_id, values) in enumerate(cases):
