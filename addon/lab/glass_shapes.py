@@ -86,19 +86,18 @@ def glass_node_material(roughness: float, ior: float):
     return material
 
 
-def render_shape(shape: str, make_material, env, size_px: int, samples: int, seed: int,
-                 max_bounces: int = 64):
+def render_shape(shape: str, make_material, env, size_px: int, samples: int, seeds,
+                 max_bounces: int = 64) -> list:
     """Render the shape with the material `make_material()` builds (called after the scene is
-    reset); returns the image (size_px, size_px, 4)."""
+    reset) at each of `seeds`, its OSL compiled once; returns the images (size_px, size_px, 4)."""
     view = layout(size_px)
     scene = harness.new_scene()
-    harness.configure_render(scene, view, samples, seed, max_bounces)
+    harness.configure_render(scene, view, samples, seeds[0], max_bounces)
     harness.add_world(scene, env, light_sampling=False)
     harness.add_camera(scene, view)
     add_shape(scene, shape, make_material())
     harness.check_compiled()
-    image, _ = harness.render(scene)
-    return image
+    return harness.render_each_seed(scene, seeds)
 
 
 def render_plane_pair(make_front, make_back, tilt: float, env, samples: int, seed: int):

@@ -412,19 +412,27 @@ def render_seeds_envs(specs: list, envs: list, samples: int, seeds, **kwargs):
     compiled once for all (most of a grid's time). Returns (layout, {env name: [image per
     seed]})."""
     scene, layout = _spec_scene(specs, envs[0], samples, seeds[0], **kwargs)
-    scene.render.use_persistent_data = True
     by_env = {}
+    for env in envs:
+        if env is not envs[0]:
+            add_world(scene, env, kwargs.get("light_sampling", True))
+        by_env[env.name] = render_each_seed(scene, seeds)
+    return layout, by_env
+
+
+def render_each_seed(scene, seeds) -> list:
+    """The scene rendered at each of `seeds` with Cycles' persistent data on: the scene and its
+    compiled OSL are kept between the renders, so the shaders are compiled once (the pixels are
+    those of separate renders: tests/test_harness.py). Returns [image per seed]."""
+    scene.render.use_persistent_data = True
     try:
-        for env in envs:
-            if env is not envs[0]:
-                add_world(scene, env, kwargs.get("light_sampling", True))
-            by_env[env.name] = []
-            for seed in seeds:
-                scene.cycles.seed = seed
-                by_env[env.name].append(render(scene)[0])
+        images = []
+        for seed in seeds:
+            scene.cycles.seed = seed
+            images.append(render(scene)[0])
+        return images
     finally:
         scene.render.use_persistent_data = False
-    return layout, by_env
 
 
 def _spec_scene(specs, env, samples, seed, cols=4, cell_px=32, materials=None, solid=False,
