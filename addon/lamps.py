@@ -25,13 +25,14 @@ Record slots (RECORD_SIZE floats, world space):
          it too only moves noise.
 
 A world spot's texels (SpotTexels) are the equirectangular image's own pixels about the spot,
-times the Background's strength, which the shader reads as Cycles reads the image (osl/nee.h
+times the Background's strength, which the shader reads as Cycles reads the image (osl/spots.h
 spot_radiance); their table's slots, from the record's offset:
   0-1    the image's width and height
   2-5    the box: first column, first row (row 0 at the bottom), columns, rows (columns wrap)
   6      1 for Linear interpolation, 0 for Closest
   7-15   the rotation taking a world direction to the image's lookup direction, row by row
   16-    the box's linear RGB, row by row from its first row
+  then   the box's texels' cumulative shares in the shaders' sampling (SpotTexels.cumulative)
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ from dataclasses import dataclass
 
 KINDS = ("sun", "sphere", "rect", "ellipse")
 RECORD_SIZE = 19
-SPOT_HEADER_SIZE = 16  # a world spot's texel slots before its RGB (osl/nee.h MFL_SPOT_HEADER)
+SPOT_HEADER_SIZE = 16  # a world spot's texel slots before its RGB (osl/spots.h MFL_SPOT_HEADER)
 # Lamps beyond this many are not handed over (the shader loops over every record per sample).
 MAX_LAMPS = 128
 # A guiding weight is clamped to this, so that sums over 100 lamps stay finite in float.
@@ -63,7 +64,33 @@ class SpotTexels:
         header = [float(self.width), float(self.height), *map(float, self.box),
                   float(self.linear), *map(float, self.rotation)]
         assert len(header) == SPOT_HEADER_SIZE
-        return header + [float(x) for x in self.rgb]
+        return header + [float(x) for x in self.rgb] + self.cumulative()
+
+    def texel_solid_angle(self, row: int) -> float:
+        """Solid angle of one texel of image row `row` (row 0 at the bottom)."""
+        s0, s1 = (math.sin((y / self.height - 0.5) * math.pi) for y in (row, row + 1))
+        return 2.0 * math.pi / self.width * (s1 - s0)
+
+    def cumulative(self) -> list[float]:
+        """The box's texels' cumulative shares in the shaders' sampling (osl/spots.h
+        spot_sample), row by row: luminance times solid angle, the luminance for Linear the
+        largest of the texel's 3 x 3 neighbours (a Linear lookup inside a texel reads those), so
+        that every direction with light has a density; the last share is 1."""
+        cols, rows = self.box[2], self.box[3]
+        lum = [[sum(w * self.rgb[3 * (r * cols + c) + k] for k, w in enumerate(LUMINANCE))
+                for c in range(cols)] for r in range(rows)]
+        if self.linear:
+            lum = [[max(lum[rr][cc] for rr in range(max(r - 1, 0), min(r + 2, rows))
+                        for cc in range(max(c - 1, 0), min(c + 2, cols)))
+                    for c in range(cols)] for r in range(rows)]
+        total, out = 0.0, []
+        for r in range(rows):
+            omega = self.texel_solid_angle(self.box[1] + r)
+            for c in range(cols):
+                total += max(lum[r][c], 0.0) * omega
+                out.append(total)
+        return [x / total for x in out] if total > 0.0 else [(i + 1.0) / len(out)
+                                                             for i in range(len(out))]
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,10 @@ SPOT_CONTRAST = 20.0
 MIN_SPOT_SHARE = 0.05
 # Bright pixels this far from a spot's brightest pixel are not part of it (a spot is small).
 MAX_SPOT_HALF_ANGLE = math.radians(10.0)
-# A spot's own pixels go to the shaders (their prediction of its light, osl/nee.h) when the box
-# a lookup inside its cone may read has at most this many a side (40 x 40 RGB: 4,800 floats in
-# the shader's text); a larger spot is aimed at and controlled as before.
+# A spot's own pixels go to the shaders (their prediction of its light, osl/nee.h, and the
+# directions drawn toward it, osl/spots.h) when the box a lookup inside its cone may read has
+# at most this many a side (40 x 40 RGB and sampling shares: 6,400 floats in the shader's
+# text); a larger spot is aimed at and controlled as before.
 MAX_TEXELS = 40
 
 
@@ -166,6 +167,52 @@ def box_texels(box, rgb, width: int, height: int, linear: bool, rotation=None,
     rotation = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
     return SpotTexels(width, height, tuple(int(b) for b in box), bool(linear),
                       tuple(rotation.reshape(-1)), tuple(np.maximum(rgb, 0.0).reshape(-1)))
+
+
+def spot_pixel(texels: SpotTexels, dirs) -> tuple:
+    """Where the spot's image reads the world directions (n, 3): pixel coordinates (x, y)."""
+    d = np.asarray(dirs, dtype=float) @ np.asarray(texels.rotation, dtype=float).reshape(3, 3).T
+    x = (0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * math.pi)) * texels.width
+    y = (np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / math.pi + 0.5) * texels.height
+    return x, y
+
+
+def spot_sample(texels: SpotTexels, u1, u2) -> np.ndarray:
+    """World directions (n, 3) over the spot's texels (twin of osl/spots.h spot_sample): texel
+    t with its share (SpotTexels.cumulative) by u1, uniform over its solid angle: u1's place
+    within the share across its columns, u2 uniform in sin(latitude) across its row."""
+    cum = np.asarray(texels.cumulative())
+    col0, row0, cols, _ = texels.box
+    u1 = np.asarray(u1, dtype=float)
+    t = np.minimum(np.searchsorted(cum, u1, side="right"), len(cum) - 1)
+    before = np.where(t > 0, cum[np.maximum(t - 1, 0)], 0.0)
+    share = cum[t] - before
+    fx = np.where(share > 0.0, np.clip((u1 - before) / np.where(share > 0, share, 1.0), 0, 1),
+                  0.5)
+    x = col0 + t % cols + fx
+    y = row0 + t // cols
+    s0, s1 = (np.sin((yy / texels.height - 0.5) * math.pi) for yy in (y, y + 1))
+    sl = s0 + (s1 - s0) * np.asarray(u2, dtype=float)
+    cl = np.sqrt(np.maximum(1.0 - sl * sl, 0.0))
+    phi = (0.5 - x / texels.width) * 2.0 * math.pi
+    d = np.stack([cl * np.cos(phi), cl * np.sin(phi), sl], -1)
+    return d @ np.asarray(texels.rotation, dtype=float).reshape(3, 3)  # R^T d
+
+
+def spot_pdf(texels: SpotTexels, dirs) -> np.ndarray:
+    """spot_sample's density over solid angle toward world directions (n, 3) (twin of
+    osl/spots.h spot_pdf): the share of the texel each falls in over its solid angle."""
+    cum = np.asarray(texels.cumulative())
+    col0, row0, cols, rows = texels.box
+    x, y = spot_pixel(texels, dirs)
+    ix, iy = np.floor(x).astype(int), np.floor(y).astype(int)
+    c = (ix - col0) % texels.width
+    r = np.clip(iy, 0, texels.height - 1) - row0
+    inside = (c < cols) & (r >= 0) & (r < rows) & (iy >= 0) & (iy < texels.height)
+    t = np.where(inside, r * cols + c, 0)
+    share = cum[t] - np.where(t > 0, cum[np.maximum(t - 1, 0)], 0.0)
+    omega = np.array([texels.texel_solid_angle(int(i)) for i in np.clip(iy, 0, texels.height - 1)])
+    return np.where(inside, share / omega, 0.0)
 
 
 def sky_sun_direction(elevation: float, rotation: float) -> np.ndarray:

@@ -20,6 +20,7 @@
 #include "bsdf.h"
 
 // @lamps
+#include "spots.h"
 #define MFL_LAMP_SUN 0
 #define MFL_LAMP_SPHERE 1
 #define MFL_LAMP_RECT 2
@@ -134,10 +135,27 @@ vector sample_cone(vector axis, float one_minus_cos, float u1, float u2)
     return (sin_t * cos(phi)) * t + (sin_t * sin(phi)) * b + cos_t * axis;
 }
 
-// A direction toward lamp i from P (world space), drawn from p_i.
+// The offset of a world spot's texels in the spot table (addon/lamps.py, slot 15 of a sun),
+// where the shaders read them, else -1.
+int lamp_texels(int i)
+{
+#if MFL_SPOT_TEXELS
+    if (lamp_kind(i) == MFL_LAMP_SUN)
+        return int(lamp_datum(i, 15) + 0.5) - 1;
+#endif
+    return -1;
+}
+
+// A direction toward lamp i from P (world space), drawn from p_i: over a world spot's texels by
+// their light (spots.h) where the shaders read them.
 vector sample_lamp(int i, point P, float u1, float u2)
 {
     int kind = lamp_kind(i);
+#if MFL_SPOT_TEXELS
+    int texels = lamp_texels(i);
+    if (texels >= 0)
+        return spot_sample(texels, u1, u2);
+#endif
     if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
         vector axis;
         float omc, sin2;
@@ -159,10 +177,16 @@ vector sample_lamp(int i, point P, float u1, float u2)
     return normalize(q - P);
 }
 
-// p_i(dir) over solid angle: uniform over a cone, or area density dist^2 / (A |cos|).
+// p_i(dir) over solid angle: uniform over a cone, or area density dist^2 / (A |cos|); a world
+// spot's over its texels (spots.h) where the shaders read them.
 float lamp_pdf(int i, point P, vector dir)
 {
     int kind = lamp_kind(i);
+#if MFL_SPOT_TEXELS
+    int texels = lamp_texels(i);
+    if (texels >= 0)
+        return spot_pdf(texels, dir);
+#endif
     if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
         vector axis;
         float omc, sin2;
@@ -249,7 +273,7 @@ float nee_horizon() { return min(0.9 * dot(I, Ng), 0.01) + MFL_NEE_HORIZON_MARGI
 // (nee.h lamps_light); what the rule keeps out is a small lamp there: the deltas Cycles turns
 // onto the line from under it meet it unaimed, rare and heavy (a point lamp on Suzanne's
 // horizon: pixels of +12 at 64 samples). A wide lamp meets them often and lightly, and the
-// estimate above the line is worth more (docs/light-sampling-measurements.md, sec. 16).
+// estimate above the line is worth more (docs/noise-measurements.md, sec. 16).
 int lamp_estimable(int i, point P)
 {
     vector axis;

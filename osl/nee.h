@@ -33,44 +33,6 @@ closure color nee_emission(color weight)
     return lobe;
 }
 
-#if MFL_SPOT_TEXELS
-// Texel (ix, iy) of the world spot whose texels start at o (addon/lamps.py SpotTexels): columns
-// wrap around the image, rows stop at its edges (the box holds no pole); 0 outside the box.
-color spot_texel(int o, int ix, int iy)
-{
-    int width = int(spot_datum(o));
-    int c = ix - int(spot_datum(o + 2));
-    int r = clamp(iy, 0, int(spot_datum(o + 1)) - 1) - int(spot_datum(o + 3));
-    c = ((c % width) + width) % width;
-    int cols = int(spot_datum(o + 4));
-    if (c >= cols || r < 0 || r >= int(spot_datum(o + 5)))
-        return color(0.0);
-    int k = o + MFL_SPOT_HEADER + 3 * (r * cols + c);
-    return color(spot_datum(k), spot_datum(k + 1), spot_datum(k + 2));
-}
-
-// A world spot's radiance toward dir, read from its texels as Cycles reads an equirectangular
-// Environment Texture: u = 1/2 - atan2(d_y, d_x) / 2 pi, v = 1/2 + atan2(d_z, hypot(d_x, d_y))
-// / pi of the lookup direction d = R dir, written as Cycles' own OSL node writes it (OSL's trig
-// is approximate: acos(d_z) in place of the atan2 read 5e-4 off in Linear), at (u W, v H),
-// Closest or Linear (Cycles' interp_closest, interp_linear: texel centres at half-integers).
-color spot_radiance(int o, vector dir)
-{
-    vector d = vector(dot(vector(spot_datum(o + 7), spot_datum(o + 8), spot_datum(o + 9)), dir),
-                      dot(vector(spot_datum(o + 10), spot_datum(o + 11), spot_datum(o + 12)), dir),
-                      dot(vector(spot_datum(o + 13), spot_datum(o + 14), spot_datum(o + 15)), dir));
-    float x = (-atan2(d[1], d[0]) / M_2PI + 0.5) * spot_datum(o);
-    float y = (atan2(d[2], hypot(d[0], d[1])) / M_PI + 0.5) * spot_datum(o + 1);
-    if (spot_datum(o + 6) < 0.5)
-        return spot_texel(o, int(floor(x)), int(floor(y)));
-    float fx = x - 0.5 - floor(x - 0.5);
-    float fy = y - 0.5 - floor(y - 0.5);
-    int ix = int(floor(x - 0.5));
-    int iy = int(floor(y - 0.5));
-    return (1.0 - fy) * ((1.0 - fx) * spot_texel(o, ix, iy) + fx * spot_texel(o, ix + 1, iy)) +
-           fy * ((1.0 - fx) * spot_texel(o, ix, iy + 1) + fx * spot_texel(o, ix + 1, iy + 1));
-}
-#endif
 
 #if MFL_LAMP_COUNT > 0
 // Lamp i's predicted radiance toward dir from P: 0 outside the lamp itself (no sampling
@@ -88,7 +50,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
         if (!in_cone(dir, lamp_vector(i, 4), omc * (2.0 - omc)))
             return color(0.0);
 #if MFL_SPOT_TEXELS
-        int texels = int(lamp_datum(i, 15) + 0.5) - 1;  // a world spot's (addon/lamps.py)
+        int texels = lamp_texels(i);
         if (texels >= 0)
             return spot_radiance(texels, dir);
 #endif
@@ -153,12 +115,12 @@ color lamps_light(point P, vector dir)
 // numbers are white noise (cycles.h rng), where Cycles stratifies its own light samples over a
 // pixel's samples: on the look-dev Suzanne's area lamp a Lambertian's light through this
 // estimate, one direction per sample, had 8.8 times the variance of Cycles' Diffuse BSDF
-// (docs/light-sampling-measurements.md, sec. 16). Across a lamp narrow against both a closed
+// (docs/noise-measurements.md, sec. 16). Across a lamp narrow against both a closed
 // form hardly changes, and more directions would only cost.
 #define MFL_NEE_GRID 2
 // A 4-degree sun on a roughness-0.2 Cook-Torrance sphere (alpha 0.04): one direction per hit
 // left its highlight's pixels about 0.6 relative noise per sample
-// (docs/light-sampling-measurements.md, sec. 19).
+// (docs/noise-measurements.md, sec. 19).
 #define MFL_NEE_LOBE_SHARE 0.5
 
 int nee_grid(point P, normal Ng, int stochastic, float alpha)

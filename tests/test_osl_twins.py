@@ -1,8 +1,9 @@
 """The OSL headers and their numpy twins, file for file: the first line of each osl/*.h names
-its twin, a module of addon/lab/reference/ (`// Twin: addon/lab/reference/<module>.py`), or
-says that it has none and why (`// Twin: none. <why>`); every function the header defines has a
-function of the same name in that module (a module-level function or a method of a class
-defined there), but for the few listed in OSL_ONLY. And the text each shader is compiled from
+its twin, a module of addon/lab/reference/ (`// Twin: addon/lab/reference/<module>.py`) or a
+pure module of the add-on (`// Twin: addon/<module>.py`: a world spot's texels, which the add-on
+finds), or says that it has none and why (`// Twin: none. <why>`); every function the header
+defines has a function of the same name in that module (a module-level function or a method of
+a class defined there), but for the few listed in OSL_ONLY. And the text each shader is compiled from
 (addon/shaders.py shader_source) is self-contained: no local #include left, no function defined
 twice with one signature.
 
@@ -30,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 HEADERS = sorted(p.name for p in shaders.OSL_DIR.glob("*.h"))
 SHADERS = sorted({model.shader for model in MODELS.values()})
 TWIN_LINE = re.compile(r"^// Twin: (?:none\. (?P<why>\S.*)"
-                       r"|addon/lab/reference/(?P<module>\w+)\.py\b)")
+                       r"|(?P<module>addon/(?:lab/reference/)?\w+)\.py\b)")
 # Return type, name, '(' at the start of a line: a function definition (calls are indented).
 DEFINITION = re.compile(r"^((?:closure\s+)?(?:void|int|float|color|vector|normal|point|matrix"
                         r"|string))\s+(\w+)\s*\(", re.M)
@@ -60,6 +61,17 @@ OSL_ONLY = {
     ("lamps.h", "lamp_estimable"): "the control variate's horizon rule (nee.h, no twin)",
     ("lamps.h", "lamp_estimated"): "the control variate's lamps (nee.h, no twin); numpy's "
                                    "lamp_share models the hits off the camera's",
+    ("lamps.h", "lamp_texels"): "reads a world spot's texel offset from the table; the "
+                                "reference's records sample a spot's cone, its texels' sampling "
+                                "has its twin in addon/world_spots.py (spots.h)",
+    ("spots.h", "spot_texel_index"): "reads the generated spot table; numpy reads SpotTexels",
+    ("spots.h", "spot_texel"): "reads the generated spot table; numpy reads SpotTexels",
+    ("spots.h", "spot_cumulative"): "reads the table's shares; numpy: SpotTexels.cumulative",
+    ("spots.h", "spot_sin_latitude"): "a row edge's latitude; numpy: "
+                                      "SpotTexels.texel_solid_angle",
+    ("spots.h", "spot_texel_solid_angle"): "numpy: SpotTexels.texel_solid_angle (addon/lamps.py)",
+    ("spots.h", "spot_radiance"): "Cycles' own image lookup, held to Cycles' render of the "
+                                  "image by tests/test_world_handover.py",
 }
 
 
@@ -73,7 +85,7 @@ def twin_module(header: str):
     assert match, f"osl/{header}: the first line must name its twin: {first_line(header)!r}"
     if match.group("module") is None:
         return None
-    return importlib.import_module(f"addon.lab.reference.{match.group('module')}")
+    return importlib.import_module(match.group("module").replace("/", "."))
 
 
 def header_functions(header: str) -> list[str]:

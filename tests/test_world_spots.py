@@ -149,10 +149,59 @@ def test_texels_carry_the_strength_and_refuse_bad_pixels():
     rgb = np.full((3, 4, 3), 2.0)
     texels = ws.box_texels(box, rgb, W, H, linear=True, scale=1.5)
     assert texels.box == box and texels.linear and np.allclose(texels.rgb, 3.0)
-    assert len(texels.floats()) == SPOT_HEADER_SIZE + 3 * 4 * 3
+    assert len(texels.floats()) == SPOT_HEADER_SIZE + 4 * 4 * 3  # RGB and sampling shares
     (record,) = ws.spot_records([((0.6, 0.48, 0.64), 0.05, 1.0)], texels=[texels])
     assert record.texels is texels and np.allclose(record.radiance, 3.0)
     rgb[0, 0, 0] = np.nan
     assert ws.box_texels(box, rgb, W, H, linear=False) is None
     assert ws.box_texels(box, np.zeros((3, 4, 3)), W, H, linear=False) is None
     assert ws.box_texels(box, np.ones((4, 4, 3)), W, H, linear=False) is None  # wrong shape
+
+
+@pytest.mark.parametrize("linear", [False, True])
+def test_spot_sampling_draws_what_its_density_says(linear):
+    """The shaders' sampling over a spot's texels (osl/spots.h, twin spot_sample / spot_pdf):
+    draws fall in each texel as its share says, the density integrates to 1 over the sphere,
+    and every direction a lookup finds light in has a density (else the control variate would
+    leave that light to the delta alone: exact, but the noise this sampling removes). Would
+    catch a share not matching its texel, a density off by the texel's solid angle or a
+    rotation applied the wrong way round."""
+    rng = np.random.default_rng(7)
+    box = (126, 40, 5, 4)  # across the seam, high in the sky (large cos of latitude change)
+    rgb = np.zeros((4, 5, 3))
+    rgb[1:3, 1:4] = rng.uniform(1.0, 50.0, (2, 3, 3))
+    rgb[0, 0] = 0.01  # a faint sky texel
+    angle = 0.7
+    rotation = np.array([[math.cos(angle), -math.sin(angle), 0.0],
+                         [math.sin(angle), math.cos(angle), 0.0], [0.0, 0.0, 1.0]])
+    texels = ws.box_texels(box, rgb, W, H, linear=linear, rotation=rotation)
+    n = 200_000
+    dirs = ws.spot_sample(texels, rng.random(n), rng.random(n))
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    assert (ws.spot_pdf(texels, dirs) > 0.0).all()
+    x, y = ws.spot_pixel(texels, dirs)
+    t = (np.floor(y).astype(int) - box[1]) * box[2] + (np.floor(x).astype(int) - box[0]) % W
+    shares = np.diff(np.concatenate([[0.0], texels.cumulative()]))
+    counts = np.bincount(t, minlength=len(shares))
+    sigma = np.sqrt(n * shares * (1.0 - shares)) + 1e-9
+    assert (np.abs(counts - n * shares) < 5.0 * sigma + 0.5).all()
+    # The integral over the box by midpoint quadrature in (x, y): dOmega = cos(lat) (2 pi / W)
+    # (pi / H) dx dy.
+    k = 64
+    gx, gy = np.meshgrid((np.arange(box[2] * k) + 0.5) / k + box[0],
+                         (np.arange(box[3] * k) + 0.5) / k + box[1])
+    lat = (gy / H - 0.5) * math.pi
+    phi = (0.5 - gx / W) * 2.0 * math.pi
+    d = np.stack([np.cos(lat) * np.cos(phi), np.cos(lat) * np.sin(phi), np.sin(lat)], -1)
+    world = d.reshape(-1, 3) @ rotation  # the lookup direction d = R w
+    pdf = ws.spot_pdf(texels, world).reshape(gx.shape)
+    total = (pdf * np.cos(lat)).sum() * (2.0 * math.pi / W) * (math.pi / H) / k ** 2
+    assert abs(total - 1.0) < 2e-3, total
+    # Light somewhere in a texel (what a Closest or Linear lookup there reads) has a density.
+    bright = rgb.sum(-1) > 0.0
+    if linear:
+        padded = np.pad(bright, 1)
+        bright = np.any([padded[1 + dr:1 + dr + 4, 1 + dc:1 + dc + 5]
+                         for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=0)
+    cells = (np.floor(gy).astype(int) - box[1], (np.floor(gx).astype(int) - box[0]) % W)
+    assert (pdf[bright[cells]] > 0.0).all()
