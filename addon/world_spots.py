@@ -177,6 +177,17 @@ def spot_pixel(texels: SpotTexels, dirs) -> tuple:
     return x, y
 
 
+def spot_sin_latitude(texels: SpotTexels, y):
+    """sin(latitude) at the bottom edge of image rows y (row 0 at the bottom)."""
+    return np.sin((np.asarray(y, dtype=float) / texels.height - 0.5) * math.pi)
+
+
+def spot_texel_solid_angle(texels: SpotTexels, iy):
+    """Solid angle of one texel of image rows iy: (2 pi / W) (sin lat_top - sin lat_bottom)."""
+    return (2.0 * math.pi / texels.width) * (spot_sin_latitude(texels, np.asarray(iy) + 1)
+                                             - spot_sin_latitude(texels, iy))
+
+
 def spot_sample(texels: SpotTexels, u1, u2) -> np.ndarray:
     """World directions (n, 3) over the spot's texels (twin of osl/spots.h spot_sample): texel
     t with its share (SpotTexels.cumulative) by u1, uniform over its solid angle: u1's place
@@ -191,7 +202,7 @@ def spot_sample(texels: SpotTexels, u1, u2) -> np.ndarray:
                   0.5)
     x = col0 + t % cols + fx
     y = row0 + t // cols
-    s0, s1 = (np.sin((yy / texels.height - 0.5) * math.pi) for yy in (y, y + 1))
+    s0, s1 = spot_sin_latitude(texels, y), spot_sin_latitude(texels, y + 1)
     sl = s0 + (s1 - s0) * np.asarray(u2, dtype=float)
     cl = np.sqrt(np.maximum(1.0 - sl * sl, 0.0))
     phi = (0.5 - x / texels.width) * 2.0 * math.pi
@@ -211,7 +222,7 @@ def spot_pdf(texels: SpotTexels, dirs) -> np.ndarray:
     inside = (c < cols) & (r >= 0) & (r < rows) & (iy >= 0) & (iy < texels.height)
     t = np.where(inside, r * cols + c, 0)
     share = cum[t] - np.where(t > 0, cum[np.maximum(t - 1, 0)], 0.0)
-    omega = np.array([texels.texel_solid_angle(int(i)) for i in np.clip(iy, 0, texels.height - 1)])
+    omega = spot_texel_solid_angle(texels, np.clip(iy, 0, texels.height - 1))
     return np.where(inside, share / omega, 0.0)
 
 

@@ -33,7 +33,6 @@ closure color nee_emission(color weight)
     return lobe;
 }
 
-
 #if MFL_LAMP_COUNT > 0
 // Lamp i's predicted radiance toward dir from P: 0 outside the lamp itself (no sampling
 // margin: the margin's directions see what lies beyond the lamp). dist receives the distance

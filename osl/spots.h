@@ -1,4 +1,4 @@
-// Twin: addon/world_spots.py (spot_pixel, spot_sample, spot_pdf; the rest read the table).
+// Twin: addon/world_spots.py (the functions that read no table; the rest read spot_datum).
 // Microfacet Lab: a world spot's own texels (addon/lamps.py SpotTexels, from offset o of the
 // generated spot_datum table): the radiance the shaders predict from them (nee.h), and
 // directions drawn over them in proportion to their light (lamps.h sample_lamp), as Cycles'

@@ -3,9 +3,9 @@ its twin, a module of addon/lab/reference/ (`// Twin: addon/lab/reference/<modul
 pure module of the add-on (`// Twin: addon/<module>.py`: a world spot's texels, which the add-on
 finds), or says that it has none and why (`// Twin: none. <why>`); every function the header
 defines has a function of the same name in that module (a module-level function or a method of
-a class defined there), but for the few listed in OSL_ONLY. And the text each shader is compiled from
-(addon/shaders.py shader_source) is self-contained: no local #include left, no function defined
-twice with one signature.
+a class defined there), but for the few listed in OSL_ONLY. And the text each shader is
+compiled from (addon/shaders.py shader_source) is self-contained: no local #include left, no
+function defined twice with one signature.
 
 What this catches: a function renamed on one side only, moved to another header or module, or
 added to a header without its twin; a header whose first line names a module that does not
@@ -67,9 +67,6 @@ OSL_ONLY = {
     ("spots.h", "spot_texel_index"): "reads the generated spot table; numpy reads SpotTexels",
     ("spots.h", "spot_texel"): "reads the generated spot table; numpy reads SpotTexels",
     ("spots.h", "spot_cumulative"): "reads the table's shares; numpy: SpotTexels.cumulative",
-    ("spots.h", "spot_sin_latitude"): "a row edge's latitude; numpy: "
-                                      "SpotTexels.texel_solid_angle",
-    ("spots.h", "spot_texel_solid_angle"): "numpy: SpotTexels.texel_solid_angle (addon/lamps.py)",
     ("spots.h", "spot_radiance"): "Cycles' own image lookup, held to Cycles' render of the "
                                   "image by tests/test_world_handover.py",
 }
