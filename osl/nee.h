@@ -187,6 +187,15 @@ color nee_estimate(color rv, color light, float pn, float pd)
     return (pn > 0.0) ? rv * light * (nee_share(pn, pd) / pn) : color(0.0);
 }
 
+// The same where the directions came from several strategies (lee_vgroove.osl
+// nee_sample_spike): p_all, the sum over the strategies of their direction counts times their
+// densities, divides; the share stays nee_share(pn, pd), a function of the direction, as
+// nee_cancel's. Not divided by the count.
+color nee_estimate_mixed(color rv, color light, float pn, float pd, float p_all)
+{
+    return (p_all > 0.0) ? rv * light * (nee_share(pn, pd) / p_all) : color(0.0);
+}
+
 // The delta's weight W toward a direction where light (lamps_light) is not 0: Cycles' own
 // roulette continues a path with probability sqrt(max throughput), and a path it ends would
 // leave its subtraction unpaired (an unbounded negative sample: W L for a sun of radiance
