@@ -23,7 +23,10 @@ COMPAT ?= 4.2 4.5 5.0
 # BSDF node). On the pinned release only (the same maths on every version, and test time): the
 # point and area lamps, the 4-degree sun's aimed row, Lee under the suns, the control variate
 # without and with a wrong prediction and its noise, the glass ball and bowl against the traced
-# twin, and the report's smoke run (the report is lab tooling).
+# twin, and the report's smoke run (the report is lab tooling). In make test, on 4.2 LTS only
+# (not on the versions between it and the pinned release, whose API branches it and the pinned
+# release bracket: tests/conftest.py, `oldest_only`): the lamps' maths (the residual, the
+# controls, the control variate), the sun on a face's horizon and the lab's harness.
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails bench-animation lee-furnace fallback-fit tables clean
@@ -35,7 +38,8 @@ venvs: venv
 	@for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt >/dev/null; done
 
 # Two lanes side by side on 2 cores (scripts/test_lanes.sh): the render tests on the pinned
-# release; beside them the tests that do not render, then the compatibility suites.
+# release; beside them the tests that do not render, then the compatibility suites (on 4.5 and
+# 5.0 less the tests marked `oldest_only`: tests/conftest.py).
 test: venvs
 	scripts/test_lanes.sh $(PY) --compat $(COMPAT_PYS)
 
@@ -43,6 +47,7 @@ test: venvs
 test-full: venv
 	scripts/test_lanes.sh $(PY)
 
+# The whole compatibility suite on every older Blender, `oldest_only` tests included.
 test-compat: venvs
 	@for v in $(COMPAT); do \
 	  py=$$($(VENV_SH) tests/compat/requirements-$$v.txt); \

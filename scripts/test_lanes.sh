@@ -5,10 +5,11 @@
 #           that do not render marked `render_lane` (tests/conftest.py: the lanes' balance);
 #   lane 2: the other tests that do not render (numpy, mostly one core) on the pinned release, then
 #           the compatibility suite (-m "compat and not release_only") on each older Blender
-#           whose Python follows --compat, one after the other.
+#           whose Python follows --compat, one after the other, the oldest first; on the others,
+#           less the tests marked `oldest_only` (tests/conftest.py says which, and why).
 # Lane 1's output streams; lane 2's is printed when both are done. Fails if any run fails.
 #
-#     scripts/test_lanes.sh PINNED_PYTHON [--compat PYTHON ...] [-- PYTEST ARGS...]
+#     scripts/test_lanes.sh PINNED_PYTHON [--compat OLDEST_PYTHON PYTHON ...] [-- PYTEST ARGS...]
 #
 # PYTEST ARGS narrow every run (e.g. -k back_face); a run left with no test is then no failure.
 set -uo pipefail
@@ -40,10 +41,12 @@ lane2() {
   echo "== the tests that do not render, Blender $(version "$py") (beside the render tests)"
   "$py" -m pytest "${opts[@]}" -m "not render and not render_lane" "$@" tests
   ok $? || rc=1
+  local marks="compat and not release_only"
   for p in "${compat[@]}"; do
     echo "== compatibility suite on Blender $(version "$p")"
-    "$p" -m pytest "${opts[@]}" -m "compat and not release_only" "$@" tests
+    "$p" -m pytest "${opts[@]}" -m "$marks" "$@" tests
     ok $? || rc=1
+    marks="compat and not release_only and not oldest_only"  # past the oldest
   done
   return "$rc"
 }

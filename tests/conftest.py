@@ -12,7 +12,18 @@
   lane, and the native branches' fit, 24 s alone, joined them; on 2026-12-05, 31 s after it,
   and Heitz 2016's walk tests, 23 s alone, joined them; later that day the render lane ran 1008 s
   and the other 988, and the compatibility suites lost more renders than the render lane, so
-  the walk tests went back). Set below by module.
+  the walk tests went back; on 2026-12-06, with the compatibility suites between the oldest and
+  the pinned release shortened (`oldest_only`), the stability sweep's numpy tests went back
+  too; its OSL stress grids render, so stay in the render lane). Set below by module.
+
+- `oldest_only`: in a compat module, run by the compatibility suite on the oldest supported
+  Blender (4.2 LTS) and not on the versions between it and the pinned release: Cycles' maths
+  under lamps (the shaders' split, the aimed residual, the controls) and the lab's own harness.
+  Each of addon/compat.py's differences that these reach (the conductor's Fresnel, the
+  back-face IOR) takes on 4.5 and 5.0 the way it takes on one of the two ends, and the two ends
+  run them; the versions between keep everything that calls Blender's API (install, node
+  groups, presets, assets, CLI, hand-over of lamps and world, native branches). Set below by
+  module.
 
 A test that uses a fixture which renders is a render test whatever its own marks say, so the
 two lanes never both pay for one fixture (the report's smoke run is two minutes).
@@ -20,7 +31,8 @@ two lanes never both pay for one fixture (the report's smoke run is two minutes)
 import pytest
 
 RENDERING_FIXTURES = {"smoke"}  # tests/test_report.py: the report's smoke run
-RENDER_LANE_MODULES = {"test_stability.py", "test_fallback_fit.py"}
+RENDER_LANE_MODULES = {"test_fallback_fit.py"}
+OLDEST_ONLY_MODULES = {"test_render_lights.py", "test_harness.py", "test_render_terminator.py"}
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -30,3 +42,5 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.render)
         if item.path.name in RENDER_LANE_MODULES:
             item.add_marker(pytest.mark.render_lane)
+        if item.path.name in OLDEST_ONLY_MODULES:
+            item.add_marker(pytest.mark.oldest_only)
