@@ -11,7 +11,7 @@ SHELL := /bin/bash
 
 VENV_SH := scripts/venv.sh
 PY = $$($(VENV_SH) requirements.txt)
-COMPAT ?= 4.2 4.5 5.0
+COMPAT ?= 4.2 4.5 5.0  # oldest first: scripts/test_lanes.sh runs its whole suite on the first
 # The compatibility suite (tests marked `compat`, less those marked `release_only`; see
 # tests/conftest.py): install the zip, build every node group and check it compiled, apply and
 # render every preset, a white-furnace sphere against the numpy reference, the CLI; the node
