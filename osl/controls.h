@@ -66,8 +66,7 @@ color fresnel_lo(int fresnel_type, float u_lo, float u_hi, float ior, color n, c
     if (fresnel_type == MFL_FRESNEL_TYPE_DIELECTRIC)
         return color(fresnel_dielectric(u_hi, ior));
     if (fresnel_type == MFL_FRESNEL_TYPE_CONDUCTOR)
-        return color(conductor_min(u_lo, u_hi, n[0], k[0]), conductor_min(u_lo, u_hi, n[1], k[1]),
-                     conductor_min(u_lo, u_hi, n[2], k[2]));
+        return conductor_min(u_lo, u_hi, n, k);
     return color(1.0);
 }
 

@@ -50,7 +50,10 @@ vector to_local(vector v, vector t, vector b, normal n)
 
 vector to_world(vector v, vector t, vector b, normal n) { return v[0] * t + v[1] * b + v[2] * n; }
 
-float safe_nan(float x, float fallback) { return isnan(x) ? fallback : x; }
+// x, or fallback where x is NaN (the one value for which abs(x) >= 0 is false). Not isnan(x),
+// which the shader optimizer does not fold: every clamped parameter, and all the code that
+// depends on it, would stay in the compiled shader (docs/cycles-osl.md, "Constant folding").
+float safe_nan(float x, float fallback) { return (abs(x) >= 0.0) ? x : fallback; }
 
 // ---------------------------------------------------------------------------------------
 // Refraction closures.

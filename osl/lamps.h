@@ -60,7 +60,17 @@ vector lamp_vector(int i, int j)
     return vector(lamp_datum(i, j), lamp_datum(i, j + 1), lamp_datum(i, j + 2));
 }
 
-int lamp_kind(int i) { return int(lamp_datum(i, 0) + 0.5); }
+// Where every lamp in the table is of one kind (MFL_LAMP_ONE_KIND, written by the add-on; -1
+// where they differ), as under one sun or one area lamp, the kind is a constant, and the shader
+// optimizer drops the other kinds' code, which OSL inlines at every call.
+int lamp_kind(int i)
+{
+#if MFL_LAMP_ONE_KIND >= 0
+    return MFL_LAMP_ONE_KIND;
+#else
+    return int(lamp_datum(i, 0) + 0.5);
+#endif
+}
 
 // An area lamp's half-extent axes, enlarged by MFL_LAMP_MARGIN for sampling and density.
 vector lamp_u(int i) { return lamp_vector(i, 7) * (1.0 + MFL_LAMP_MARGIN); }

@@ -46,32 +46,53 @@ float search_x(float t, float origin, float sign, float lo, float hi)
 // Golden-section minimum of the (unimodal) conductor Fresnel factor over x in [lo, hi], searched
 // in t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
 // F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
-// (split.fresnel_min with F the conductor's, the same steps; OSL passes no functions).
+// (split.fresnel_min with F the conductor's, the same steps; OSL passes no functions). One loop
+// visits the four first points (a, b, x1, x2), then the search's new point per step, so that F
+// has one call site: OSL inlines every call, and the shader optimizer's and LLVM's time grow
+// with the code (six call sites here were a fifth of a shader's code after optimization).
 float fresnel_min(float lo, float hi, float origin, float n, float k)
 {
     float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
     float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
     float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
     float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
-    float f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
-    float f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
-    float best = min(fresnel_conductor(search_x(a, origin, sign, lo, hi), n, k),
-                     fresnel_conductor(search_x(b, origin, sign, lo, hi), n, k));
-    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
-        best = min(best, min(f1, f2));
-        if (f1 < f2) {  // the minimum lies in [a, x2]
-            b = x2;
+    float f1 = 1.0, f2 = 1.0, best = 1.0e30;
+    for (int j = -4; j < MFL_MIN_SEARCH_STEPS; ++j) {
+        int left = 0;
+        float xn = x2;
+        if (j == -4)
+            xn = a;
+        else if (j == -3)
+            xn = b;
+        else if (j == -2)
+            xn = x1;
+        else if (j >= 0) {
+            best = min(best, min(f1, f2));
+            left = f1 < f2;  // the minimum lies in [a, x2], else in [x1, b]
+            if (left)
+                b = x2;
+            else
+                a = x1;
+            xn = left ? b - MFL_GOLDEN * (b - a) : a + MFL_GOLDEN * (b - a);
+        }
+        float fn = fresnel_conductor(search_x(xn, origin, sign, lo, hi), n, k);
+        if (j < -2)
+            best = min(best, fn);
+        else if (j == -2)
+            f1 = fn;
+        else if (j == -1 || !left) {  // the new point is the right one (x1 takes x2's place)
+            if (j >= 0) {
+                x1 = x2;
+                f1 = f2;
+            }
+            x2 = xn;
+            f2 = fn;
+        }
+        else {  // the new point is the left one (x2 takes x1's place)
             x2 = x1;
             f2 = f1;
-            x1 = b - MFL_GOLDEN * (b - a);
-            f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
-        }
-        else {  // in [x1, b]
-            a = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = a + MFL_GOLDEN * (b - a);
-            f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
+            x1 = xn;
+            f1 = fn;
         }
     }
     return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
@@ -79,23 +100,32 @@ float fresnel_min(float lo, float hi, float origin, float n, float k)
 
 // Least conductor Fresnel over [lo, hi] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
 // has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
-// two sides are searched apart; otherwise one search covers [lo, 1].
+// two sides are searched apart (one call site again); otherwise one search covers [lo, hi].
 float conductor_min(float lo, float hi, float n, float k)
 {
     float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;
     float split_at = min(max(lo, xc), hi);
-    float right = fresnel_min(split_at, hi, xc, n, k);
-    if (k <= 0.0 || xc <= lo)
-        return right;
-    return min(right, fresnel_min(lo, split_at, xc, n, k));
+    int sides = (k <= 0.0 || xc <= lo) ? 1 : 2;
+    float best = 1.0e30;
+    for (int side = 0; side < sides; ++side)
+        best = min(best, fresnel_min(side == 0 ? split_at : lo, side == 0 ? hi : split_at, xc,
+                                     n, k));
+    return best;
+}
+
+// Per channel, one call site.
+color conductor_min(float lo, float hi, color n, color k)
+{
+    color F = 0;
+    for (int c = 0; c < 3; ++c)
+        F[c] = conductor_min(lo, hi, n[c], k[c]);
+    return F;
 }
 
 // F_lo per channel, the least conductor Fresnel a reflection from wi can meet.
 color conductor_lower_bound(vector wi, color n, color k)
 {
-    float lo = reachable_cos_lo(wi);
-    return color(conductor_min(lo, 1.0, n[0], k[0]), conductor_min(lo, 1.0, n[1], k[1]),
-                 conductor_min(lo, 1.0, n[2], k[2]));
+    return conductor_min(reachable_cos_lo(wi), 1.0, n, k);
 }
 
 // ---------------------------------------------------------------------------------------
