@@ -3,6 +3,8 @@
 compilation fails."""
 from __future__ import annotations
 
+import collections
+import dataclasses
 import shutil
 import tempfile
 
@@ -35,8 +37,50 @@ class ShaderCompileError(RuntimeError):
     pass
 
 
+# What oslc made of each assembled source lately, this Blender session: a hand-over recompiles
+# every Script node before each render (the lamps' table in) and after it (the prediction out),
+# so the same few sources come back on every render (0.07-0.16 s each here, half of it twice:
+# the script assignment makes Cycles compile too). An entry is reused only on a node whose sockets
+# are those the compile left (a model's sockets do not depend on the lamps' table); bounded, as
+# each bytecode is 0.2-1.4 MB.
+_COMPILED: collections.OrderedDict = collections.OrderedDict()
+_COMPILED_MAX = 24
+
+
+@dataclasses.dataclass(frozen=True)
+class _Compiled:
+    bytecode: str
+    bytecode_hash: str
+    sockets: tuple
+
+
+def _sockets(node) -> tuple:
+    return tuple((s.identifier, s.bl_idname) for s in node.inputs), \
+        tuple((s.identifier, s.bl_idname) for s in node.outputs)
+
+
+def _reuse(node, source: str) -> bool:
+    """Give `node` the bytecode oslc made of `source` before, where its sockets match."""
+    done = _COMPILED.get(source)
+    if done is None or done.sockets != _sockets(node):
+        return False
+    _COMPILED.move_to_end(source)
+    if node.bytecode != done.bytecode or node.bytecode_hash != done.bytecode_hash:
+        node.bytecode = done.bytecode
+        node.bytecode_hash = done.bytecode_hash
+    return True
+
+
+def _remember(node, source: str) -> None:
+    _COMPILED[source] = _Compiled(node.bytecode, node.bytecode_hash, _sockets(node))
+    _COMPILED.move_to_end(source)
+    while len(_COMPILED) > _COMPILED_MAX:
+        _COMPILED.popitem(last=False)
+
+
 def compile_script_node(node, model: Model, lamps=()) -> None:
-    """Point an INTERNAL Script node at the model's text and compile it now.
+    """Point an INTERNAL Script node at the model's text and compile it now (or give it the
+    bytecode of the same source compiled before, _COMPILED).
 
     Uses the Cycles add-on's own compile function, which works headless (the UI operator does
     not). Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no
@@ -44,6 +88,15 @@ def compile_script_node(node, model: Model, lamps=()) -> None:
     """
     from . import compat
 
+    text = ensure_text(model, lamps)
+    # Each assignment makes Cycles compile the node (the property's update), so only changes.
+    if node.mode != "INTERNAL":
+        node.mode = "INTERNAL"
+    if node.script != text:
+        node.script = text
+    source = text.as_string()
+    if _reuse(node, source):
+        return
     compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
 
     messages = []
@@ -57,14 +110,11 @@ def compile_script_node(node, model: Model, lamps=()) -> None:
     private = tempfile.mkdtemp(prefix="microfacet-lab-osl-")
     saved, tempfile.tempdir = tempfile.tempdir, private
     try:
-        text = ensure_text(model, lamps)
-        node.mode = "INTERNAL"
-        node.script = text
         try:
             from cycles import osl as cycles_osl
             cycles_osl.update_script_node(node, report)
-        except ImportError:  # no Cycles add-on: assigning the script compiled it already
-            pass
+        except ImportError:  # no Cycles add-on: the script's assignment compiles it
+            node.script = text
     finally:
         tempfile.tempdir = saved
         shutil.rmtree(private, ignore_errors=True)
@@ -73,3 +123,4 @@ def compile_script_node(node, model: Model, lamps=()) -> None:
             f"OSL compile of {text.name} produced no bytecode or no sockets"
             + (": " + "; ".join(messages) if messages else
                " (is Cycles OSL available? bpy.utils.expose_bundled_modules() missing?)"))
+    _remember(node, source)
