@@ -7,6 +7,7 @@ negative, NaN, huge strength; zero size) that reach the shader or break the rend
 (100) that break the compile or the render, and aimed rays that ignore light linking (a lamp
 that lights none of the spheres must leave them exactly black, aimed or not)."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -266,3 +267,45 @@ def test_the_prediction_is_withheld_where_it_cannot_pair(monkeypatch):
     monkeypatch.setattr("sys.argv", ["blender", "-b", "--cycles-device", "CPU"])
     handover.hand_over(scene)
     assert _predicts()
+
+
+def _oso_code(bytecode: str) -> str:
+    """The bytecode less the names of the temporary files it was compiled from and to."""
+    return re.sub(r'[^\s"{]*\.os[lo]\b', "FILE", bytecode)
+
+
+def test_a_source_compiled_before_is_not_compiled_again(monkeypatch):
+    """A hand-over writes the lamps into the texts before each render and takes the prediction
+    out after it, so the same sources come back render after render: the second round compiles
+    nothing (addon/shader_nodes.py _COMPILED) and leaves every node the bytecode a compile of
+    its text gives. Catches a reuse keyed on the wrong thing (a stale shader after the lamps
+    move) and one that stopped reusing."""
+    from cycles import osl as cycles_osl
+
+    scene = _scene(4)
+    add_sun(scene, angle_deg=5.0)
+    compiled = []
+    compile_ = cycles_osl.osl_compile
+    monkeypatch.setattr(cycles_osl, "osl_compile",
+                        lambda *args: compiled.append(args[0]) or compile_(*args))
+    assert handover.hand_over(scene) and handover.hand_over(scene, predict=False)
+    first = len(compiled)
+    assert first > 0
+    assert handover.hand_over(scene) and handover.hand_over(scene, predict=False)
+    assert len(compiled) == first, "a source compiled before was compiled again"
+    # A lamp that moves is a new source: compiled.
+    next(o for o in scene.objects if o.type == "LIGHT").rotation_euler[0] += 0.2
+    assert handover.hand_over(scene)
+    assert len(compiled) > first
+    for model_id in ("walter_reflection", "cook_torrance"):
+        text = bpy.data.texts[shader_nodes.text_name(MODELS[model_id])]
+        nodes = [n for m in bpy.data.materials if m.node_tree
+                 for g in m.node_tree.nodes if g.bl_idname == "ShaderNodeGroup"
+                 for n in g.node_tree.nodes if n.bl_idname == "ShaderNodeScript"
+                 and n.script == text]
+        assert nodes
+        fresh = nodes[0].id_data.nodes.new("ShaderNodeScript")
+        fresh.mode, fresh.script = "INTERNAL", text
+        cycles_osl.update_script_node(fresh, lambda *args: None)
+        assert all(_oso_code(n.bytecode) == _oso_code(fresh.bytecode) for n in nodes), model_id
+        nodes[0].id_data.nodes.remove(fresh)
