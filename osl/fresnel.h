@@ -41,11 +41,13 @@ float fresnel_conductor(float cos_i, float n, float k)
     return 0.5 * (rp + rs);
 }
 
+// Per channel through one call site: OSL inlines every call (docs/cycles-osl.md).
 color fresnel_conductor(float cos_i, color n, color k)
 {
-    return color(fresnel_conductor(cos_i, n[0], k[0]),
-                 fresnel_conductor(cos_i, n[1], k[1]),
-                 fresnel_conductor(cos_i, n[2], k[2]));
+    color F = 0;
+    for (int c = 0; c < 3; ++c)
+        F[c] = fresnel_conductor(cos_i, n[c], k[c]);
+    return F;
 }
 
 // The Fresnel factor of a model's Fresnel choice (MFL_FRESNEL_TYPE_*), per channel (1 for

@@ -62,7 +62,9 @@ vector lamp_vector(int i, int j)
 
 // Where every lamp in the table is of one kind (MFL_LAMP_ONE_KIND, written by the add-on; -1
 // where they differ), as under one sun or one area lamp, the kind is a constant, and the shader
-// optimizer drops the other kinds' code, which OSL inlines at every call.
+// optimizer drops the other kinds' code, which OSL inlines at every call. Callers compare
+// lamp_kind(i) itself, never a local copy: a named local of a function is one symbol for all
+// the function's inlined copies, and the optimizer forgets its value past a branch.
 int lamp_kind(int i)
 {
 #if MFL_LAMP_ONE_KIND >= 0
@@ -113,14 +115,13 @@ float lamp_area(int i)
 float lamp_weight(int i, point P, normal Ng)
 {
     float power = lamp_datum(i, 14);
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_SUN) {
+    if (lamp_kind(i) == MFL_LAMP_SUN) {
         float omc = lamp_datum(i, 13);
         return (dot(Ng, lamp_vector(i, 4)) > -sqrt(omc * (2.0 - omc))) ? power : 0.0;
     }
     vector to = lamp_vector(i, 1) - P;
     float d2 = dot(to, to);
-    if (kind == MFL_LAMP_SPHERE) {
+    if (lamp_kind(i) == MFL_LAMP_SPHERE) {
         float r = lamp_datum(i, 13);
         if (d2 <= r * r || dot(Ng, to) < -r)
             return 0.0;
@@ -160,13 +161,12 @@ int lamp_texels(int i)
 // their light (spots.h) where the shaders read them.
 vector sample_lamp(int i, point P, float u1, float u2)
 {
-    int kind = lamp_kind(i);
 #if MFL_SPOT_TEXELS
     int texels = lamp_texels(i);
     if (texels >= 0)
         return spot_sample(texels, u1, u2);
 #endif
-    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
+    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
         vector axis;
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
@@ -174,7 +174,7 @@ vector sample_lamp(int i, point P, float u1, float u2)
         return sample_cone(axis, omc, u1, u2);
     }
     float s, t;
-    if (kind == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
+    if (lamp_kind(i) == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
         float r = sqrt(u1);
         s = r * cos(2.0 * MFL_PI * u2);
         t = r * sin(2.0 * MFL_PI * u2);
@@ -191,13 +191,12 @@ vector sample_lamp(int i, point P, float u1, float u2)
 // spot's over its texels (spots.h) where the shaders read them.
 float lamp_pdf(int i, point P, vector dir)
 {
-    int kind = lamp_kind(i);
 #if MFL_SPOT_TEXELS
     int texels = lamp_texels(i);
     if (texels >= 0)
         return spot_pdf(texels, dir);
 #endif
-    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
+    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
         vector axis;
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
@@ -217,7 +216,7 @@ float lamp_pdf(int i, point P, vector dir)
     vector q = P + dist * dir - c;
     float s = dot(q, u) / dot(u, u);
     float t = dot(q, v) / dot(v, v);
-    int inside = (kind == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+    int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
                                             : (abs(s) <= 1.0 && abs(t) <= 1.0);
     return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
 }
@@ -227,12 +226,11 @@ float lamp_pdf(int i, point P, vector dir)
 // bounding rectangle). Returns 0 where there is none.
 int lamp_bounding_cone(int i, point P, output vector axis, output float th)
 {
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_SUN || kind == MFL_LAMP_SPHERE) {
+    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0;
-        th = (kind == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
+        th = (lamp_kind(i) == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
                                     : asin(sqrt(clamp(sin2, 0.0, 1.0)));
         return 1;
     }
@@ -292,8 +290,7 @@ int lamp_estimable(int i, point P)
         return 0;
     if (th >= MFL_NEE_WIDE_LAMP)
         return 1;
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_RECT || kind == MFL_LAMP_ELLIPSE) {
+    if (lamp_kind(i) == MFL_LAMP_RECT || lamp_kind(i) == MFL_LAMP_ELLIPSE) {
         float horizon = max(nee_horizon(), 0.0);  // a convex cone
         vector to = lamp_vector(i, 1) - P;
         vector u = lamp_u(i);

@@ -43,8 +43,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
     dist = 1e30;
     if (L[0] + L[1] + L[2] <= 0.0)
         return color(0.0);
-    int kind = lamp_kind(i);
-    if (kind == MFL_LAMP_SUN) {
+    if (lamp_kind(i) == MFL_LAMP_SUN) {
         float omc = lamp_datum(i, 13);
         if (!in_cone(dir, lamp_vector(i, 4), omc * (2.0 - omc)))
             return color(0.0);
@@ -55,7 +54,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
 #endif
         return L;
     }
-    if (kind == MFL_LAMP_SPHERE) {
+    if (lamp_kind(i) == MFL_LAMP_SPHERE) {
         vector to = lamp_vector(i, 1) - P;
         float d2 = dot(to, to);
         float r = lamp_datum(i, 13);
@@ -78,7 +77,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
     vector q = P + dist * dir - c;
     float s = dot(q, u) / dot(u, u);
     float t = dot(q, v) / dot(v, v);
-    int inside = (kind == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+    int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
                                             : (abs(s) <= 1.0 && abs(t) <= 1.0);
     return inside ? L : color(0.0);
 }

@@ -46,53 +46,32 @@ float search_x(float t, float origin, float sign, float lo, float hi)
 // Golden-section minimum of the (unimodal) conductor Fresnel factor over x in [lo, hi], searched
 // in t = sqrt(|x - origin|), origin the critical angle's cosine at one end of the interval, where
 // F has a square-root cusp that t makes smooth: the least value visited, lowered by the margin
-// (split.fresnel_min with F the conductor's, the same steps; OSL passes no functions). One loop
-// visits the four first points (a, b, x1, x2), then the search's new point per step, so that F
-// has one call site: OSL inlines every call, and the shader optimizer's and LLVM's time grow
-// with the code (six call sites here were a fifth of a shader's code after optimization).
+// (split.fresnel_min with F the conductor's, the same steps; OSL passes no functions).
 float fresnel_min(float lo, float hi, float origin, float n, float k)
 {
     float sign = (abs(hi - origin) >= abs(lo - origin)) ? 1.0 : -1.0;
     float a = sqrt(abs(((sign > 0.0) ? lo : hi) - origin));
     float b = sqrt(abs(((sign > 0.0) ? hi : lo) - origin));
     float x1 = b - MFL_GOLDEN * (b - a), x2 = a + MFL_GOLDEN * (b - a);
-    float f1 = 1.0, f2 = 1.0, best = 1.0e30;
-    for (int j = -4; j < MFL_MIN_SEARCH_STEPS; ++j) {
-        int left = 0;
-        float xn = x2;
-        if (j == -4)
-            xn = a;
-        else if (j == -3)
-            xn = b;
-        else if (j == -2)
-            xn = x1;
-        else if (j >= 0) {
-            best = min(best, min(f1, f2));
-            left = f1 < f2;  // the minimum lies in [a, x2], else in [x1, b]
-            if (left)
-                b = x2;
-            else
-                a = x1;
-            xn = left ? b - MFL_GOLDEN * (b - a) : a + MFL_GOLDEN * (b - a);
-        }
-        float fn = fresnel_conductor(search_x(xn, origin, sign, lo, hi), n, k);
-        if (j < -2)
-            best = min(best, fn);
-        else if (j == -2)
-            f1 = fn;
-        else if (j == -1 || !left) {  // the new point is the right one (x1 takes x2's place)
-            if (j >= 0) {
-                x1 = x2;
-                f1 = f2;
-            }
-            x2 = xn;
-            f2 = fn;
-        }
-        else {  // the new point is the left one (x2 takes x1's place)
+    float f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
+    float f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
+    float best = min(fresnel_conductor(search_x(a, origin, sign, lo, hi), n, k),
+                     fresnel_conductor(search_x(b, origin, sign, lo, hi), n, k));
+    for (int i = 0; i < MFL_MIN_SEARCH_STEPS; ++i) {
+        best = min(best, min(f1, f2));
+        if (f1 < f2) {  // the minimum lies in [a, x2]
+            b = x2;
             x2 = x1;
             f2 = f1;
-            x1 = xn;
-            f1 = fn;
+            x1 = b - MFL_GOLDEN * (b - a);
+            f1 = fresnel_conductor(search_x(x1, origin, sign, lo, hi), n, k);
+        }
+        else {  // in [x1, b]
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + MFL_GOLDEN * (b - a);
+            f2 = fresnel_conductor(search_x(x2, origin, sign, lo, hi), n, k);
         }
     }
     return min(best, min(f1, f2)) * (1.0 - MFL_FRESNEL_MARGIN);
@@ -100,7 +79,11 @@ float fresnel_min(float lo, float hi, float origin, float n, float k)
 
 // Least conductor Fresnel over [lo, hi] (split.conductor_min): with n < 1 and k < MFL_CUSP_K, F
 // has a (near-)plateau left of the critical angle and a cusp and narrow dip right of it, so the
-// two sides are searched apart (one call site again); otherwise one search covers [lo, hi].
+// two sides are searched apart; otherwise one search covers [lo, hi]. The sides, and the channels
+// below, loop through one call site: OSL inlines every call, and fresnel_min's six calls of F,
+// copied for each side and channel, were a fifth of a shader's code after optimization
+// (docs/cycles-osl.md). Its own steps keep their two calls: one call site there, behind a chain
+// of branches, made Cook-Torrance's conductor 50% slower per sample.
 float conductor_min(float lo, float hi, float n, float k)
 {
     float xc = (k < MFL_CUSP_K) ? critical_cos(n) : 0.0;

@@ -6,6 +6,7 @@ render_pre handler), animated lamps handed over from a stale frame, bad lamp val
 negative, NaN, huge strength; zero size) that reach the shader or break the render, many lamps
 (100) that break the compile or the render, and aimed rays that ignore light linking (a lamp
 that lights none of the spheres must leave them exactly black, aimed or not)."""
+import collections
 import math
 import re
 
@@ -282,6 +283,7 @@ def test_a_source_compiled_before_is_not_compiled_again(monkeypatch):
     move) and one that stopped reusing."""
     from cycles import osl as cycles_osl
 
+    monkeypatch.setattr(shader_nodes, "_COMPILED", collections.OrderedDict())  # none yet
     scene = _scene(4)
     add_sun(scene, angle_deg=5.0)
     compiled = []

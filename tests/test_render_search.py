@@ -4,11 +4,11 @@ on every version) against its numpy twin (addon/lab/reference/split.py), case by
 
 A plane seen by an orthographic camera, one pixel per case: the probe shader reads the case's
 interval [lo, hi] and complex IOR per channel from a table by the pixel's column and row, and
-emits the search's result (emission() gives its weight as the pixel's radiance). The search runs
-in OSL through one call site for F (fresnel_min's loop: see docs/cycles-osl.md, "Constant
-folding"), the twin through numpy's steps, so this catches a step that keeps the wrong bracket, a
-point lost or visited twice, a side of the critical angle left out, a channel mixed up. The two
-differ by float32 rounding only (measured below).
+emits the search's result (emission() gives its weight as the pixel's radiance). The OSL search
+loops over sides and channels through one call site (docs/cycles-osl.md, "Constant folding"),
+the twin broadcasts them, so this catches a step that keeps the wrong bracket, a point lost, a
+side of the critical angle left out, a channel mixed up. The two differ by float32 rounding only
+(measured below).
 """
 import numpy as np
 import pytest
