@@ -63,8 +63,10 @@ vector lamp_vector(int i, int j)
 // Where every lamp in the table is of one kind (MFL_LAMP_ONE_KIND, written by the add-on; -1
 // where they differ), as under one sun or one area lamp, the kind is a constant, and the shader
 // optimizer drops the other kinds' code, which OSL inlines at every call. Callers compare
-// lamp_kind(i) itself, never a local copy: a named local of a function is one symbol for all
-// the function's inlined copies, and the optimizer forgets its value past a branch.
+// lamp_kind(i) itself, never a local copy (a named local of a function is one symbol for all
+// the function's inlined copies, and the optimizer forgets its value past a branch), and put
+// the other kinds' code in an else: the optimizer drops a folded branch's other side, not the
+// code after a return.
 int lamp_kind(int i)
 {
 #if MFL_LAMP_ONE_KIND >= 0
@@ -127,11 +129,13 @@ float lamp_weight(int i, point P, normal Ng)
             return 0.0;
         return power / (4.0 * MFL_PI * d2);
     }
-    float front = -dot(lamp_vector(i, 4), to);  // distance of P in front of the lamp's plane
-    float extent = length(lamp_vector(i, 7)) + length(lamp_vector(i, 10));
-    if (front <= 0.0 || dot(Ng, to) < -extent)
-        return 0.0;
-    return power * front / (MFL_PI * sqrt(d2) * max(d2, lamp_area(i)));
+    else {  // an area lamp (an else, for the optimizer: see lamp_kind)
+        float front = -dot(lamp_vector(i, 4), to);  // P's distance in front of the lamp's plane
+        float extent = length(lamp_vector(i, 7)) + length(lamp_vector(i, 10));
+        if (front <= 0.0 || dot(Ng, to) < -extent)
+            return 0.0;
+        return power * front / (MFL_PI * sqrt(d2) * max(d2, lamp_area(i)));
+    }
 }
 
 // Uniform direction in the cone around axis with the given 1 - cos(half-angle).
@@ -173,18 +177,20 @@ vector sample_lamp(int i, point P, float u1, float u2)
             return vector(0, 0, 1);
         return sample_cone(axis, omc, u1, u2);
     }
-    float s, t;
-    if (lamp_kind(i) == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
-        float r = sqrt(u1);
-        s = r * cos(2.0 * MFL_PI * u2);
-        t = r * sin(2.0 * MFL_PI * u2);
-    }
     else {
-        s = 2.0 * u1 - 1.0;
-        t = 2.0 * u2 - 1.0;
+        float s, t;
+        if (lamp_kind(i) == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
+            float r = sqrt(u1);
+            s = r * cos(2.0 * MFL_PI * u2);
+            t = r * sin(2.0 * MFL_PI * u2);
+        }
+        else {
+            s = 2.0 * u1 - 1.0;
+            t = 2.0 * u2 - 1.0;
+        }
+        point q = lamp_vector(i, 1) + s * lamp_u(i) + t * lamp_v(i);
+        return normalize(q - P);
     }
-    point q = lamp_vector(i, 1) + s * lamp_u(i) + t * lamp_v(i);
-    return normalize(q - P);
 }
 
 // p_i(dir) over solid angle: uniform over a cone, or area density dist^2 / (A |cos|); a world
@@ -203,22 +209,24 @@ float lamp_pdf(int i, point P, vector dir)
             return 0.0;
         return in_cone(dir, axis, sin2) ? 1.0 / (2.0 * MFL_PI * omc) : 0.0;
     }
-    vector n = lamp_vector(i, 4);
-    float cos_l = -dot(dir, n);
-    if (cos_l <= 0.0)
-        return 0.0;
-    vector u = lamp_u(i);
-    vector v = lamp_v(i);
-    point c = lamp_vector(i, 1);
-    float dist = dot(P - c, n) / cos_l;
-    if (dist <= 0.0)
-        return 0.0;
-    vector q = P + dist * dir - c;
-    float s = dot(q, u) / dot(u, u);
-    float t = dot(q, v) / dot(v, v);
-    int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
-                                            : (abs(s) <= 1.0 && abs(t) <= 1.0);
-    return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
+    else {
+        vector n = lamp_vector(i, 4);
+        float cos_l = -dot(dir, n);
+        if (cos_l <= 0.0)
+            return 0.0;
+        vector u = lamp_u(i);
+        vector v = lamp_v(i);
+        point c = lamp_vector(i, 1);
+        float dist = dot(P - c, n) / cos_l;
+        if (dist <= 0.0)
+            return 0.0;
+        vector q = P + dist * dir - c;
+        float s = dot(q, u) / dot(u, u);
+        float t = dot(q, v) / dot(v, v);
+        int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+                                                        : (abs(s) <= 1.0 && abs(t) <= 1.0);
+        return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
+    }
 }
 
 // A cone holding every direction toward lamp i from P: lamp_cone for suns and sphere lamps;
@@ -231,22 +239,24 @@ int lamp_bounding_cone(int i, point P, output vector axis, output float th)
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0;
         th = (lamp_kind(i) == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
-                                    : asin(sqrt(clamp(sin2, 0.0, 1.0)));
+                                            : asin(sqrt(clamp(sin2, 0.0, 1.0)));
         return 1;
     }
-    vector to = lamp_vector(i, 1) - P;
-    float d = length(to);
-    if (d <= 0.0)
-        return 0;
-    axis = to / d;
-    th = 0.0;
-    vector u = lamp_u(i);
-    vector v = lamp_v(i);
-    for (int c = 0; c < 4; c++) {
-        vector corner = normalize(to + ((c & 1) ? u : -u) + ((c & 2) ? v : -v));
-        th = max(th, acos(clamp(dot(corner, axis), -1.0, 1.0)));
+    else {
+        vector to = lamp_vector(i, 1) - P;
+        float d = length(to);
+        if (d <= 0.0)
+            return 0;
+        axis = to / d;
+        th = 0.0;
+        vector u = lamp_u(i);
+        vector v = lamp_v(i);
+        for (int c = 0; c < 4; c++) {
+            vector corner = normalize(to + ((c & 1) ? u : -u) + ((c & 2) ? v : -v));
+            th = max(th, acos(clamp(dot(corner, axis), -1.0, 1.0)));
+        }
+        return 1;
     }
-    return 1;
 }
 // The lamp's radiance as the hand-over predicts it (slots 16-18), 0 where it does not.
 color lamp_predicted(int i)
@@ -303,8 +313,10 @@ int lamp_estimable(int i, point P)
         }
         return 1;
     }
-    float lowest = asin(clamp(dot(axis, Ng), -1.0, 1.0)) - th;
-    return lowest > 0.0 && sin(lowest) > nee_horizon();
+    else {
+        float lowest = asin(clamp(dot(axis, Ng), -1.0, 1.0)) - th;
+        return lowest > 0.0 && sin(lowest) > nee_horizon();
+    }
 }
 
 // Whether nee.h estimates lamp i's light here: a predicted radiance, on the camera's hits, and

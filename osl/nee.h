@@ -54,7 +54,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
 #endif
         return L;
     }
-    if (lamp_kind(i) == MFL_LAMP_SPHERE) {
+    else if (lamp_kind(i) == MFL_LAMP_SPHERE) {  // else: lamps.h lamp_kind
         vector to = lamp_vector(i, 1) - P;
         float d2 = dot(to, to);
         float r = lamp_datum(i, 13);
@@ -64,22 +64,24 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
         dist = sqrt(d2) - r;
         return in_cone(dir, to / sqrt(d2), sin2) ? L : color(0.0);
     }
-    vector n = lamp_vector(i, 4);
-    float cos_l = -dot(dir, n);
-    if (cos_l <= 0.0)
-        return color(0.0);
-    point c = lamp_vector(i, 1);
-    dist = dot(P - c, n) / cos_l;
-    if (dist <= 0.0)
-        return color(0.0);
-    vector u = lamp_vector(i, 7);
-    vector v = lamp_vector(i, 10);
-    vector q = P + dist * dir - c;
-    float s = dot(q, u) / dot(u, u);
-    float t = dot(q, v) / dot(v, v);
-    int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
-                                            : (abs(s) <= 1.0 && abs(t) <= 1.0);
-    return inside ? L : color(0.0);
+    else {
+        vector n = lamp_vector(i, 4);
+        float cos_l = -dot(dir, n);
+        if (cos_l <= 0.0)
+            return color(0.0);
+        point c = lamp_vector(i, 1);
+        dist = dot(P - c, n) / cos_l;
+        if (dist <= 0.0)
+            return color(0.0);
+        vector u = lamp_vector(i, 7);
+        vector v = lamp_vector(i, 10);
+        vector q = P + dist * dir - c;
+        float s = dot(q, u) / dot(u, u);
+        float t = dot(q, v) / dot(v, v);
+        int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+                                                        : (abs(s) <= 1.0 && abs(t) <= 1.0);
+        return inside ? L : color(0.0);
+    }
 }
 #endif
 
