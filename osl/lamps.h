@@ -121,20 +121,22 @@ float lamp_weight(int i, point P, normal Ng)
         float omc = lamp_datum(i, 13);
         return (dot(Ng, lamp_vector(i, 4)) > -sqrt(omc * (2.0 - omc))) ? power : 0.0;
     }
-    vector to = lamp_vector(i, 1) - P;
-    float d2 = dot(to, to);
-    if (lamp_kind(i) == MFL_LAMP_SPHERE) {
-        float r = lamp_datum(i, 13);
-        if (d2 <= r * r || dot(Ng, to) < -r)
-            return 0.0;
-        return power / (4.0 * MFL_PI * d2);
-    }
-    else {  // an area lamp (an else, for the optimizer: see lamp_kind)
-        float front = -dot(lamp_vector(i, 4), to);  // P's distance in front of the lamp's plane
-        float extent = length(lamp_vector(i, 7)) + length(lamp_vector(i, 10));
-        if (front <= 0.0 || dot(Ng, to) < -extent)
-            return 0.0;
-        return power * front / (MFL_PI * sqrt(d2) * max(d2, lamp_area(i)));
+    else {  // an else, for the optimizer: see lamp_kind
+        vector to = lamp_vector(i, 1) - P;
+        float d2 = dot(to, to);
+        if (lamp_kind(i) == MFL_LAMP_SPHERE) {
+            float r = lamp_datum(i, 13);
+            if (d2 <= r * r || dot(Ng, to) < -r)
+                return 0.0;
+            return power / (4.0 * MFL_PI * d2);
+        }
+        else {  // an area lamp
+            float front = -dot(lamp_vector(i, 4), to);  // P's distance in front of its plane
+            float extent = length(lamp_vector(i, 7)) + length(lamp_vector(i, 10));
+            if (front <= 0.0 || dot(Ng, to) < -extent)
+                return 0.0;
+            return power * front / (MFL_PI * sqrt(d2) * max(d2, lamp_area(i)));
+        }
     }
 }
 
