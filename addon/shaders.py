@@ -175,9 +175,13 @@ def shader_source(model: Model, lamps=()) -> str:
     source = (OSL_DIR / f"{model.shader}.osl").read_text()
     source = source.replace("    // @parameters", parameter_declarations(model))
     source = source.replace("    // @clamp_parameters", clamp_statements(model))
-    source = inline_headers(source)
-    source = source.replace("// @lamps", lamp_table_block(lamps))
-    # The enum codes and version facts precede everything, headers included.
+    return assemble(source, lamps)
+
+
+def assemble(source: str, lamps=()) -> str:
+    """An OSL text made self-contained: its headers inlined, the lamp table written, the enum
+    codes and version facts before everything (a model's shader, or a test's probe)."""
+    source = inline_headers(source).replace("// @lamps", lamp_table_block(lamps))
     return enum_defines() + version_defines() + source
 
 

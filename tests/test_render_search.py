@@ -63,8 +63,7 @@ def _probe_material(cases):
     data = ", ".join(f"{x:.9g}" for x in cases.ravel())
     source = PROBE % {"size": cases.size, "data": data, "slots": SLOTS, "rows": ROWS,
                       "cols": COLS}
-    source = shaders.inline_headers(source).replace("// @lamps", shaders.lamp_table_block([]))
-    source = shaders.enum_defines() + shaders.version_defines() + source
+    source = shaders.assemble(source)
     compat.expose_bundled_modules()
     material = harness.osl_material(source, "search probe")
     harness.check_compiled()

@@ -154,9 +154,7 @@ def _probe_material(records):
     """A material whose emission is the shaders' predicted radiance of lamp 0 toward the ray
     (osl/nee.h lamp_radiance, with the hand-over's table)."""
     from addon import shaders
-    source = shaders.inline_headers('#include "nee.h"\n' + PROBE)
-    source = source.replace("// @lamps", shaders.lamp_table_block(records))
-    source = shaders.enum_defines() + shaders.version_defines() + source
+    source = shaders.assemble('#include "nee.h"\n' + PROBE, records)
     compat.expose_bundled_modules()
     material = harness.osl_material(source, "spot probe")
     harness.check_compiled()
