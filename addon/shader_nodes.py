@@ -4,6 +4,7 @@ compilation fails."""
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import shutil
 import tempfile
@@ -78,46 +79,62 @@ def _remember(node, source: str) -> None:
         _COMPILED.popitem(last=False)
 
 
+@contextlib.contextmanager
+def _private_temporary_folder():
+    """Cycles' compile of an INTERNAL script writes its .oso into the temporary folder and never
+    removes it (0.1-1.4 MB a compile; one make test left 1.7 GB in /tmp), and assigning a Script
+    node's mode or script runs that compile too (the property's update): both run inside a
+    folder of our own, removed after (the bytecode is in the node by then)."""
+    private = tempfile.mkdtemp(prefix="microfacet-lab-osl-")
+    saved, tempfile.tempdir = tempfile.tempdir, private
+    try:
+        yield
+    finally:
+        tempfile.tempdir = saved
+        shutil.rmtree(private, ignore_errors=True)
+
+
+def point_at(node, text) -> None:
+    """Make `node` an INTERNAL script reading `text`, leaving no file behind. Each assignment
+    makes Cycles compile the node (the property's update), so only changes are assigned."""
+    with _private_temporary_folder():
+        if node.mode != "INTERNAL":
+            node.mode = "INTERNAL"
+        if node.script != text:
+            node.script = text
+
+
+def compile_text(node, text, report=lambda kind, message: None) -> None:
+    """Point `node` at `text` and compile it now with the Cycles add-on's own compile, which works
+    headless (the UI operator does not), leaving no file behind; without the Cycles add-on the
+    script's assignment compiles it. Failures go to `report(kind, message)`."""
+    point_at(node, text)
+    with _private_temporary_folder():
+        try:
+            from cycles import osl as cycles_osl
+            cycles_osl.update_script_node(node, report)
+        except ImportError:
+            node.script = text
+
+
 def compile_script_node(node, model: Model, lamps=()) -> None:
     """Point an INTERNAL Script node at the model's text and compile it now (or give it the
     bytecode of the same source compiled before, _COMPILED).
 
-    Uses the Cycles add-on's own compile function, which works headless (the UI operator does
-    not). Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no
-    sockets and no bytecode; that case is turned into a loud error here.
+    Without `bpy.utils.expose_bundled_modules()` the compile fails silently, leaving no sockets
+    and no bytecode; that case is turned into a loud error here.
     """
     from . import compat
 
     text = ensure_text(model, lamps)
-    # Each assignment makes Cycles compile the node (the property's update), so only changes.
-    if node.mode != "INTERNAL":
-        node.mode = "INTERNAL"
-    if node.script != text:
-        node.script = text
+    point_at(node, text)
     source = text.as_string()
     if _reuse(node, source):
         return
     compat.expose_bundled_modules()  # the wheel's oslquery, or the compile fails silently
 
     messages = []
-
-    def report(kind, message):
-        messages.append(f"{kind}: {message}")
-
-    # Cycles' compile leaves its .oso in the temporary folder (1-4 MB a shader, every compile:
-    # a hand-over recompiles before and after each render), so it compiles into a folder of our
-    # own, removed after (the bytecode is in the node by then).
-    private = tempfile.mkdtemp(prefix="microfacet-lab-osl-")
-    saved, tempfile.tempdir = tempfile.tempdir, private
-    try:
-        try:
-            from cycles import osl as cycles_osl
-            cycles_osl.update_script_node(node, report)
-        except ImportError:  # no Cycles add-on: the script's assignment compiles it
-            node.script = text
-    finally:
-        tempfile.tempdir = saved
-        shutil.rmtree(private, ignore_errors=True)
+    compile_text(node, text, lambda kind, message: messages.append(f"{kind}: {message}"))
     if not node.bytecode or len(node.outputs) == 0:
         raise ShaderCompileError(
             f"OSL compile of {text.name} produced no bytecode or no sockets"

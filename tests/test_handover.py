@@ -307,7 +307,6 @@ def test_a_source_compiled_before_is_not_compiled_again(monkeypatch):
                  and n.script == text]
         assert nodes
         fresh = nodes[0].id_data.nodes.new("ShaderNodeScript")
-        fresh.mode, fresh.script = "INTERNAL", text
-        cycles_osl.update_script_node(fresh, lambda *args: None)
+        shader_nodes.compile_text(fresh, text)
         assert all(_oso_code(n.bytecode) == _oso_code(fresh.bytecode) for n in nodes), model_id
         nodes[0].id_data.nodes.remove(fresh)

@@ -130,9 +130,7 @@ def test_an_opaque_dielectric_looks_the_same_from_both_sides(model_id):
 def _compiled_for_the_other_side_of_5_3(material):
     """The material's shader recompiled as the other side of Blender 5.3 would have compiled
     it (the back-face fact inverted), as in a .blend saved by another Blender."""
-    from cycles import osl as cycles_osl
-
-    from addon import nodes
+    from addon import nodes, shader_nodes
 
     group = next(n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
     script = group.nodes[nodes.SCRIPT_NODE_NAME]
@@ -140,7 +138,7 @@ def _compiled_for_the_other_side_of_5_3(material):
     define = "#define MFL_CYCLES_INVERTS_BACKFACE_IOR "
     value = source.split(define, 1)[1][0]
     script.script.from_string(source.replace(define + value, define + str(1 - int(value))))
-    cycles_osl.update_script_node(script, lambda *args: None)
+    shader_nodes.compile_text(script, script.script)
     assert script.bytecode
     return material
 

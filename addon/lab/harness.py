@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 
 from .. import compat
-from .. import handover, nodes
+from .. import handover, nodes, shader_nodes
 from . import images
 from .grid import Environment, GridLayout
 
@@ -325,10 +325,7 @@ def osl_material(source: str, name: str):
     text = bpy.data.texts.new(name + ".osl")
     text.write(source)
     script = tree.nodes.new("ShaderNodeScript")
-    script.mode = "INTERNAL"
-    script.script = text
-    from cycles import osl as cycles_osl
-    cycles_osl.update_script_node(script, lambda *args: None)
+    shader_nodes.compile_text(script, text)
     tree.links.new(script.outputs[0], output.inputs["Surface"])
     return material
 
