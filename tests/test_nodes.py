@@ -338,7 +338,7 @@ def test_operators_and_panel_warn_when_osl_cannot_run(tmp_path):
 
 RENDER = '''
 import ctypes, os, re, sys, tempfile, time
-root, mode, exr, blend = sys.argv[1:5]
+root, mode, exr, blend, listing = sys.argv[1:6]
 sys.path.insert(0, root)
 import bpy
 from addon import nodes
@@ -347,8 +347,10 @@ from addon.lab import grid, harness
 
 CASES = [(m.id, p.id, item) for m in MODELS.values() for p in m.params if p.kind == ENUM
          for item in p.items]
-if mode == "varying":  # one item of each enum shows it read at run time (19 spheres, not 42)
-    CASES = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
+# One item of each enum (19 spheres, not 42): enough to show how each enum is read.
+ONE_EACH = [c for i, c in enumerate(CASES) if all(c[:2] != d[:2] for d in CASES[:i])]
+if mode == "varying":  # each enum read at run time
+    CASES = ONE_EACH
 
 def maker(i, model_id, pid, item):
     def make():
@@ -376,29 +378,39 @@ def maker(i, model_id, pid, item):
 # descriptors go back: without it the tail of the listing went to the terminal, a varying share
 # of it (a CI run lost every "connected" line of one enum that way).
 libc = ctypes.CDLL(None)
-sys.stdout.flush(); sys.stderr.flush()
-saved = [os.dup(1), os.dup(2)]
-with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-    os.dup2(out.fileno(), 1); os.dup2(err.fileno(), 2)
-    try:
-        layout, image, seconds = harness.render_specs(
-            None, grid.GRADIENT, 4, seed=5, cols=6, cell_px=20, path=exr,
-            materials=[maker(i, *case) for i, case in enumerate(CASES)])
-    finally:
-        sys.stdout.flush(); sys.stderr.flush(); libc.fflush(None)
-        os.dup2(saved[0], 1); os.dup2(saved[1], 2)
-        [os.close(fd) for fd in saved]
-    printed = ""
-    for tmp in (out, err):
-        tmp.seek(0)
-        printed += tmp.read().decode(errors="replace")
+
+def render_cases(cases, path, options):
+    """Render the cases' grid with OSL_OPTIONS `options` (read each time Cycles creates its OSL
+    shading system, at every render here); returns (layout, image, seconds, what was printed)."""
+    os.environ["OSL_OPTIONS"] = options
+    sys.stdout.flush(); sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        os.dup2(out.fileno(), 1); os.dup2(err.fileno(), 2)
+        try:
+            layout, image, seconds = harness.render_specs(
+                None, grid.GRADIENT, 4, seed=5, cols=6, cell_px=20, path=path,
+                materials=[maker(i, *case) for i, case in enumerate(cases)])
+        finally:
+            sys.stdout.flush(); sys.stderr.flush(); libc.fflush(None)
+            os.dup2(saved[0], 1); os.dup2(saved[1], 2)
+            [os.close(fd) for fd in saved]
+        printed = ""
+        for tmp in (out, err):
+            tmp.seek(0)
+            printed += tmp.read().decode(errors="replace")
+    return layout, image, seconds, printed
+
 # The OSL runtime optimizer's statistics (OSL_OPTIONS=statistics:level=1), without timings
 # ("Merged 0 instances (...) in 0.01s" read 0.00s in the other run of a CI) and without what is
 # alive at the moment of printing ("current").
-stats = [re.sub(r" in [0-9.]+s$", "", re.sub(r",[^,]*current", "", line.strip()))
-         for line in printed.splitlines()
-         if re.match(r"\\s*(Instances:|Compiled|Optimized|Constant connections|Global connections"
-                     r"|Merged|After optimization|Instance connections)", line)]
+def statistics(printed):
+    return [re.sub(r" in [0-9.]+s$", "", re.sub(r",[^,]*current", "", line.strip()))
+            for line in printed.splitlines()
+            if re.match(r"\\s*(Instances:|Compiled|Optimized|Constant connections"
+                        r"|Global connections|Merged|After optimization|Instance connections)",
+                        line)]
+
 # With OSL_OPTIONS debug=1 the optimizer lists each layer before and after optimizing: a folded
 # enum is read by no `useparam` op, a connected one is listed "param int in_<id> (...) connected".
 # Only whole lines of the listing's two forms count (the test lists only where the lines are
@@ -406,17 +418,33 @@ stats = [re.sub(r" in [0-9.]+s$", "", re.sub(r",[^,]*current", "", line.strip())
 USEPARAM = re.compile(r"^ *\\d+: useparam((?: [^ \\t]+)+)\\t#", re.M)
 CONNECTED = re.compile(r"^param int in_(\\w+) \\(used [-\\d ]+ read [-\\d ]+ "
                        r"write [-\\d ]+\\) connected$", re.M)
-enum_ids = sorted({pid for _, pid, _ in CASES})
-reads = [arg for args in USEPARAM.findall(printed) for arg in args.split()]
-connected = CONNECTED.findall(printed)
-folding = {pid: {"useparam": reads.count(f"in_{pid}"), "connected": connected.count(pid)}
-           for pid in enum_ids}
+
+def folding(printed, cases):
+    reads = [arg for args in USEPARAM.findall(printed) for arg in args.split()]
+    connected = CONNECTED.findall(printed)
+    return {pid: {"useparam": reads.count(f"in_{pid}"), "connected": connected.count(pid)}
+            for pid in sorted({pid for _, pid, _ in cases})}
+
+# The whole grid with the optimizer's statistics. The layer listing (debug=1: 47 MB and about 14
+# s for the 42 spheres) is of the one-item-per-enum grid only: the varying chain's own grid, and
+# for the menus a render of its own after the file is saved (the farm test renders the saved
+# grid), which also gives the statistics that the varying chain's are compared with.
+STATS = "statistics:level=1"
+DEBUG = STATS + (",debug=1" if listing == "1" else "")
+layout, image, seconds, printed = render_cases(CASES, exr, DEBUG if mode == "varying" else STATS)
 menus = sorted({s.type for m in bpy.data.materials if m.node_tree for n in m.node_tree.nodes
                 if n.bl_idname == "ShaderNodeGroup" for s in n.inputs})
 if blend != "-":
     bpy.ops.wm.save_as_mainfile(filepath=blend, compress=False)
-report({"cases": CASES, "stats": stats, "folding": folding, "seconds": seconds, "socket_types": menus,
-        "samples": 4, "pixels": layout.width * layout.height})
+result = {"cases": CASES, "stats": statistics(printed), "seconds": seconds, "socket_types": menus,
+          "samples": 4, "pixels": layout.width * layout.height}
+if mode == "menu":
+    _, _, _, printed = render_cases(ONE_EACH, exr + ".one_each.exr", DEBUG)
+    result["one_each_stats"] = statistics(printed)
+if listing == "1":
+    result.update(folding=folding(printed, ONE_EACH),
+                  layers_listed=len(re.findall(r"^After optimizing layer", printed, re.M)))
+report(result)
 '''
 
 # Cycles optimizes the shader groups on one thread from 5.1 on Linux. Before, OSL optimizes them
@@ -450,11 +478,11 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
         work = tmp_path / mode
         work.mkdir()
         blend = str(work / "menus.blend") if mode == "menu" else "-"
-        # The layer listing (debug=1, about 9 s and 47 MB a run) for the menus and the varying
-        # chain; the integers' statistics equal to the menus' say their folding is the same.
-        debug = ",debug=1" if mode != "int" and SERIAL_LISTING else ""
+        # The layer listing of one item per enum, for the menus and the varying chain; the
+        # integers' statistics equal to the menus' say their folding is the same.
+        listing = "1" if mode != "int" and SERIAL_LISTING else "0"
         out = run_bpy_script(RENDER, work, str(ROOT), mode, str(work / "grid.exr"), blend,
-                             env={"OSL_OPTIONS": "statistics:level=1" + debug}, timeout=300)
+                             listing, timeout=300)
         runs[mode] = (out, images.read_image(work / "grid.exr"))
     menu, menu_image = runs["menu"]
     integer, int_image = runs["int"]
@@ -495,15 +523,20 @@ def test_menus_render_and_fold_exactly_as_integer_codes(tmp_path):
 
     assert any(line.startswith("Compiled") for line in menu["stats"]), menu["_log"]
     assert folding_stats(menu["stats"]) == folding_stats(integer["stats"])
-    # ... while the same codes through a varying chain are seen as connections.
-    assert varying["stats"] != integer["stats"]
+    # ... while the same codes through a varying chain are seen as connections (the same grid,
+    # one item per enum, with menus).
+    assert len(varying["stats"]) == len(menu["one_each_stats"])
+    assert varying["stats"] != menu["one_each_stats"]
     # Per shader layer: no enum survives optimization as a parameter read with menus (and the
     # integers' optimizer statistics are the menus', above); through the varying chain every
     # one is connected and read at run time.
     if SERIAL_LISTING:
         print(f"[menus] enum parameters left after optimization: menu {menu['folding']}, "
-              f"varying {varying['folding']}")
+              f"varying {varying['folding']}; layers listed {menu['layers_listed']}, "
+              f"{varying['layers_listed']}")
         zero = {"useparam": 0, "connected": 0}
+        # Listed at all (OSL_OPTIONS set between renders reached the menus' second render).
+        assert menu["layers_listed"] > 0 and varying["layers_listed"] > 0
         assert set(menu["folding"]) == set(ENUMS)
         assert menu["folding"] == {pid: zero for pid in ENUMS}
         assert all(f["connected"] > 0 and f["useparam"] > 0
