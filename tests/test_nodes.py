@@ -24,7 +24,7 @@ from bpy_helpers import run_bpy_script
 
 bpy = pytest.importorskip("bpy", reason="bpy is part of the pinned test environment")
 
-from addon import compat, fallback, nodes, ui  # noqa: E402
+from addon import compat, fallback, nodes, shader_nodes, ui  # noqa: E402
 from addon.catalog import COLOR, ENUM, ENUMS, FACTOR, MODELS, VECTOR  # noqa: E402
 from addon.lab import harness, images  # noqa: E402
 
@@ -195,11 +195,45 @@ def test_building_a_group_leaves_no_file_in_the_temporary_folder(tmp_path, monke
     bpy.context.scene.render.engine = "CYCLES"
     monkeypatch.setattr(shader_nodes, "_COMPILED", collections.OrderedDict())
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    for model_id in MODELS:
-        group = nodes.ensure_group(model_id)
-        assert group.nodes[nodes.SCRIPT_NODE_NAME].bytecode, model_id
+    for model in MODELS.values():
+        group = nodes.build_group(model)
+        assert group.nodes[nodes.SCRIPT_NODE_NAME].bytecode, model.id
     assert tempfile.gettempdir() == str(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+def _plain(value):
+    """A socket's value as Python data (an array's outlives the file it was read from)."""
+    return tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+
+
+def _tree_signature(group):
+    script = group.nodes[nodes.SCRIPT_NODE_NAME]
+    return (sorted((n.name, n.bl_idname) for n in group.nodes),
+            sorted((l.from_node.name, l.from_socket.identifier, l.to_node.name,
+                    l.to_socket.identifier) for l in group.links),
+            [(s.name, s.socket_type, _plain(getattr(s, "default_value", None)))
+             for s in group.interface.items_tree if getattr(s, "in_out", None)],
+            script.script.name, script.script.as_string(), script.bytecode)
+
+
+def test_a_new_file_gets_the_group_built_before_in_the_session():
+    """ensure_group appends, into a file without the group and its text, the copy this session
+    built (addon/nodes.py _append_built): the same nodes, links, sockets, text and bytecode as
+    a build, with no library left behind; a file that has a text of that name gets a build.
+    Catches a stale or partial copy (a missing native branch, another text)."""
+    for model_id, model in MODELS.items():
+        harness.new_scene()
+        built = _tree_signature(nodes.build_group(model))
+        harness.new_scene()
+        appended = nodes.ensure_group(model_id)
+        assert len(bpy.data.libraries) == 0 and nodes._is_valid(appended, model)
+        assert _tree_signature(appended) == built, model_id
+    harness.new_scene()
+    text = bpy.data.texts.new(shader_nodes.text_name(MODELS["cook_torrance"]))
+    assert nodes._append_built(MODELS["cook_torrance"]) is None
+    group = nodes.ensure_group("cook_torrance")
+    assert group.nodes[nodes.SCRIPT_NODE_NAME].script == text
+
 
 def test_set_inputs_takes_catalog_ids_and_menus_refuse_unknown_items():
     harness.new_scene()
