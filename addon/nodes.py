@@ -167,17 +167,22 @@ def ensure_group(model_id: str):
 # The groups built in this Blender session, each written to a .blend of its own in a private
 # temporary folder (removed at exit). A new file gets a group appended from it (about 15 ms)
 # instead of built again (0.4-1.3 s: Blender updates the tree after each of its 150-600 nodes
-# and links; a sixth of the render tests' time went to rebuilding groups in fresh files).
+# and links: rebuilding them in fresh files took 24.7 of the 213 s of two render-test modules).
 _BUILT: dict = {}
 _BUILT_FOLDER: list = []
 
 
 def _keep_built(model: Model, group) -> None:
-    if not _BUILT_FOLDER:
-        _BUILT_FOLDER.append(tempfile.mkdtemp(prefix="microfacet-lab-groups-"))
-        atexit.register(shutil.rmtree, _BUILT_FOLDER[0], True)
-    path = os.path.join(_BUILT_FOLDER[0], model.id + ".blend")
-    bpy.data.libraries.write(path, {group}, fake_user=False)
+    """Write the group just built to its .blend (where that fails, later files build it)."""
+    _BUILT.pop(model.id, None)
+    try:
+        if not _BUILT_FOLDER:
+            _BUILT_FOLDER.append(tempfile.mkdtemp(prefix="microfacet-lab-groups-"))
+            atexit.register(shutil.rmtree, _BUILT_FOLDER[0], True)
+        path = os.path.join(_BUILT_FOLDER[0], model.id + ".blend")
+        bpy.data.libraries.write(path, {group}, fake_user=False)
+    except (OSError, RuntimeError):
+        return
     _BUILT[model.id] = path
 
 
@@ -187,8 +192,11 @@ def _append_built(model: Model):
     path = _BUILT.get(model.id)
     if path is None or not os.path.exists(path) or shader_nodes.text_name(model) in bpy.data.texts:
         return None
-    with bpy.data.libraries.load(path, link=False) as (source, target):
-        target.node_groups = [group_name(model)]
+    try:
+        with bpy.data.libraries.load(path, link=False) as (source, target):
+            target.node_groups = [group_name(model)]
+    except (OSError, RuntimeError):
+        return None
     for library in [lib for lib in bpy.data.libraries
                     if os.path.normpath(bpy.path.abspath(lib.filepath)) == os.path.normpath(path)]:
         bpy.data.libraries.remove(library)  # appended, not linked: the file keeps no reference
