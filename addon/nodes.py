@@ -166,7 +166,7 @@ def ensure_group(model_id: str):
 
 # The groups built in this Blender session, each written to a .blend of its own in a private
 # temporary folder (removed at exit). A new file gets a group appended from it (about 15 ms)
-# instead of built again (0.4-1.3 s: Blender updates the tree after each of its 150-600 nodes
+# instead of built again (0.2-1.5 s: Blender updates the tree after each of its 150-600 nodes
 # and links: rebuilding them in fresh files took 24.7 of the 213 s of two render-test modules).
 _BUILT: dict = {}
 _BUILT_FOLDER: list = []
