@@ -189,8 +189,6 @@ def test_building_a_group_leaves_no_file_in_the_temporary_folder(tmp_path, monke
     import collections
     import tempfile
 
-    from addon import shader_nodes
-
     harness.new_scene()
     bpy.context.scene.render.engine = "CYCLES"
     monkeypatch.setattr(shader_nodes, "_COMPILED", collections.OrderedDict())
@@ -200,6 +198,7 @@ def test_building_a_group_leaves_no_file_in_the_temporary_folder(tmp_path, monke
         assert group.nodes[nodes.SCRIPT_NODE_NAME].bytecode, model.id
     assert tempfile.gettempdir() == str(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
 
 def _plain(value):
     """A socket's value as Python data (an array's outlives the file it was read from)."""
@@ -216,16 +215,20 @@ def _tree_signature(group):
             script.script.name, script.script.as_string(), script.bytecode)
 
 
-def test_a_new_file_gets_the_group_built_before_in_the_session():
+def test_a_new_file_gets_the_group_built_before_in_the_session(monkeypatch):
     """ensure_group appends, into a file without the group and its text, the copy this session
     built (addon/nodes.py _append_built): the same nodes, links, sockets, text and bytecode as
     a build, with no library left behind; a file that has a text of that name gets a build.
     Catches a stale or partial copy (a missing native branch, another text)."""
+    monkeypatch.setattr(nodes, "_BUILT", {})  # nothing built yet: the first call builds
+    build = nodes.build_group
     for model_id, model in MODELS.items():
         harness.new_scene()
-        built = _tree_signature(nodes.build_group(model))
+        built = _tree_signature(nodes.ensure_group(model_id))
         harness.new_scene()
+        monkeypatch.setattr(nodes, "build_group", lambda *a, **k: pytest.fail("built again"))
         appended = nodes.ensure_group(model_id)
+        monkeypatch.setattr(nodes, "build_group", build)
         assert len(bpy.data.libraries) == 0 and nodes._is_valid(appended, model)
         assert _tree_signature(appended) == built, model_id
     harness.new_scene()
