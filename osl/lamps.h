@@ -62,11 +62,14 @@ vector lamp_vector(int i, int j)
 
 // Where every lamp in the table is of one kind (MFL_LAMP_ONE_KIND, written by the add-on; -1
 // where they differ), as under one sun or one area lamp, the kind is a constant, and the shader
-// optimizer drops the other kinds' code, which OSL inlines at every call. Callers compare
-// lamp_kind(i) itself, never a local copy (a named local of a function is one symbol for all
-// the function's inlined copies, and the optimizer forgets its value past a branch), and put
-// the other kinds' code in an else: the optimizer drops a folded branch's other side, not the
-// code after a return.
+// optimizer drops the other kinds' code, which OSL inlines at every call. Where they differ,
+// the kinds absent from the table (MFL_LAMP_KINDS: a flag per kind) still fold away: a sun and
+// a point lamp leave the area lamps' code out (with it, Lee's runtime compile under the two
+// took 5-8 s, five times that under either alone; 2.5 s without). Callers test
+// lamp_is(i, kind) or lamp_is_area(i) itself, never a local copy (a named local of a function
+// is one symbol for all the function's inlined copies, and the optimizer forgets its value
+// past a branch), and put the other kinds' code in an else: the optimizer drops a folded
+// branch's other side, not the code after a return.
 int lamp_kind(int i)
 {
 #if MFL_LAMP_ONE_KIND >= 0
@@ -75,6 +78,20 @@ int lamp_kind(int i)
     return int(lamp_datum(i, 0) + 0.5);
 #endif
 }
+
+int lamp_is(int i, int kind)
+{
+#if MFL_LAMP_ONE_KIND >= 0
+    return kind == MFL_LAMP_ONE_KIND;
+#else
+    // An array, not bits: the optimizer folds a constant array's element, not a shift.
+    int present[4] = {MFL_LAMP_KINDS};
+    return present[kind] * (lamp_kind(i) == kind);
+#endif
+}
+
+// A rectangle or an ellipse (else a sun or a sphere lamp): 0 wherever the table has neither.
+int lamp_is_area(int i) { return lamp_is(i, MFL_LAMP_RECT) + lamp_is(i, MFL_LAMP_ELLIPSE); }
 
 // An area lamp's half-extent axes, enlarged by MFL_LAMP_MARGIN for sampling and density.
 vector lamp_u(int i) { return lamp_vector(i, 7) * (1.0 + MFL_LAMP_MARGIN); }
@@ -85,7 +102,7 @@ vector lamp_v(int i) { return lamp_vector(i, 10) * (1.0 + MFL_LAMP_MARGIN); }
 int lamp_cone(int i, point P, output vector axis, output float one_minus_cos,
               output float sin2)
 {
-    if (lamp_kind(i) == MFL_LAMP_SUN) {
+    if (lamp_is(i, MFL_LAMP_SUN)) {
         axis = lamp_vector(i, 4);
         float omc = lamp_datum(i, 13);
         sin2 = omc * (2.0 - omc);
@@ -108,7 +125,7 @@ int lamp_cone(int i, point P, output vector axis, output float one_minus_cos,
 float lamp_area(int i)
 {
     float a = length(lamp_u(i)) * length(lamp_v(i));
-    return (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? MFL_PI * a : 4.0 * a;
+    return lamp_is(i, MFL_LAMP_ELLIPSE) ? MFL_PI * a : 4.0 * a;
 }
 
 // Guiding weight of lamp i at P with normal Ng: a rough irradiance; 0 when the lamp is behind
@@ -117,14 +134,14 @@ float lamp_area(int i)
 float lamp_weight(int i, point P, normal Ng)
 {
     float power = lamp_datum(i, 14);
-    if (lamp_kind(i) == MFL_LAMP_SUN) {
+    if (lamp_is(i, MFL_LAMP_SUN)) {
         float omc = lamp_datum(i, 13);
         return (dot(Ng, lamp_vector(i, 4)) > -sqrt(omc * (2.0 - omc))) ? power : 0.0;
     }
     else {  // an else, for the optimizer: see lamp_kind
         vector to = lamp_vector(i, 1) - P;
         float d2 = dot(to, to);
-        if (lamp_kind(i) == MFL_LAMP_SPHERE) {
+        if (!lamp_is_area(i)) {  // a sphere lamp
             float r = lamp_datum(i, 13);
             if (d2 <= r * r || dot(Ng, to) < -r)
                 return 0.0;
@@ -157,7 +174,7 @@ vector sample_cone(vector axis, float one_minus_cos, float u1, float u2)
 int lamp_texels(int i)
 {
 #if MFL_SPOT_TEXELS
-    if (lamp_kind(i) == MFL_LAMP_SUN)
+    if (lamp_is(i, MFL_LAMP_SUN))
         return int(lamp_datum(i, 15) + 0.5) - 1;
 #endif
     return -1;
@@ -172,7 +189,7 @@ vector sample_lamp(int i, point P, float u1, float u2)
     if (texels >= 0)
         return spot_sample(texels, u1, u2);
 #endif
-    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
+    if (!lamp_is_area(i)) {
         vector axis;
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
@@ -181,7 +198,7 @@ vector sample_lamp(int i, point P, float u1, float u2)
     }
     else {
         float s, t;
-        if (lamp_kind(i) == MFL_LAMP_ELLIPSE) {  // uniform over the disk, then stretched
+        if (lamp_is(i, MFL_LAMP_ELLIPSE)) {  // uniform over the disk, then stretched
             float r = sqrt(u1);
             s = r * cos(2.0 * MFL_PI * u2);
             t = r * sin(2.0 * MFL_PI * u2);
@@ -204,7 +221,7 @@ float lamp_pdf(int i, point P, vector dir)
     if (texels >= 0)
         return spot_pdf(texels, dir);
 #endif
-    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
+    if (!lamp_is_area(i)) {
         vector axis;
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
@@ -225,7 +242,7 @@ float lamp_pdf(int i, point P, vector dir)
         vector q = P + dist * dir - c;
         float s = dot(q, u) / dot(u, u);
         float t = dot(q, v) / dot(v, v);
-        int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+        int inside = lamp_is(i, MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
                                                         : (abs(s) <= 1.0 && abs(t) <= 1.0);
         return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
     }
@@ -236,11 +253,11 @@ float lamp_pdf(int i, point P, vector dir)
 // bounding rectangle). Returns 0 where there is none.
 int lamp_bounding_cone(int i, point P, output vector axis, output float th)
 {
-    if (lamp_kind(i) == MFL_LAMP_SUN || lamp_kind(i) == MFL_LAMP_SPHERE) {
+    if (!lamp_is_area(i)) {
         float omc, sin2;
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0;
-        th = (lamp_kind(i) == MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
+        th = lamp_is(i, MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
                                             : asin(sqrt(clamp(sin2, 0.0, 1.0)));
         return 1;
     }
@@ -302,7 +319,7 @@ int lamp_estimable(int i, point P)
         return 0;
     if (th >= MFL_NEE_WIDE_LAMP)
         return 1;
-    if (lamp_kind(i) == MFL_LAMP_RECT || lamp_kind(i) == MFL_LAMP_ELLIPSE) {
+    if (lamp_is_area(i)) {
         float horizon = max(nee_horizon(), 0.0);  // a convex cone
         vector to = lamp_vector(i, 1) - P;
         vector u = lamp_u(i);

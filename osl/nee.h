@@ -43,7 +43,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
     dist = 1e30;
     if (L[0] + L[1] + L[2] <= 0.0)
         return color(0.0);
-    if (lamp_kind(i) == MFL_LAMP_SUN) {
+    if (lamp_is(i, MFL_LAMP_SUN)) {
         float omc = lamp_datum(i, 13);
         if (!in_cone(dir, lamp_vector(i, 4), omc * (2.0 - omc)))
             return color(0.0);
@@ -54,7 +54,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
 #endif
         return L;
     }
-    else if (lamp_kind(i) == MFL_LAMP_SPHERE) {  // else: lamps.h lamp_kind
+    else if (!lamp_is_area(i)) {  // a sphere lamp; else: lamps.h lamp_is
         vector to = lamp_vector(i, 1) - P;
         float d2 = dot(to, to);
         float r = lamp_datum(i, 13);
@@ -78,7 +78,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
         vector q = P + dist * dir - c;
         float s = dot(q, u) / dot(u, u);
         float t = dot(q, v) / dot(v, v);
-        int inside = (lamp_kind(i) == MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
+        int inside = lamp_is(i, MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
                                                         : (abs(s) <= 1.0 && abs(t) <= 1.0);
         return inside ? L : color(0.0);
     }

@@ -9,6 +9,7 @@ that lights none of the spheres must leave them exactly black, aimed or not)."""
 import collections
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from addon.lab.grid import SphereSpec  # noqa: E402
 from addon.lab.report.scenes import add_point_lamp, add_sun  # noqa: E402
 import osl_text  # noqa: E402 (tests/osl_text.py)
 
+ROOT = Path(__file__).resolve().parent.parent
 BLACK = grid.Environment("black", 0.0)
 ROW = [SphereSpec("walter_reflection", {"roughness": 0.3}, "gold"),
        SphereSpec("cook_torrance", {"roughness": 0.3, "specular": 1.0}, "Cook-Torrance"),
@@ -119,6 +121,61 @@ def test_a_hundred_lamps_compile_and_render():
     assert _lamp_count() == 100 and _lamp_count("cook_torrance") == 100
     index, _, _ = LAYOUT.pixel_geometry()
     assert np.isfinite(image).all() and image[..., :3][index >= 0].mean() > 0
+
+
+KINDS_FOLDED = r"""
+import ctypes, os, re, sys, tempfile
+root, declared = sys.argv[1:3]
+sys.path.insert(0, root)
+import bpy
+from addon import shaders
+from addon.lab import grid, harness
+from addon.lab.report.scenes import add_point_lamp, add_sun
+
+table = shaders.lamp_table_block
+if declared == "all":  # every kind declared present, as before the flags
+    shaders.lamp_table_block = lambda records: re.sub(
+        "#define MFL_LAMP_KINDS .*", "#define MFL_LAMP_KINDS 1, 1, 1, 1", table(records))
+scene = harness.new_scene()
+material = harness.model_material("walter_reflection", {"roughness": 0.3}, "gold")
+harness.build_grid_scene(grid.GridLayout(rows=1, cols=1, cell_px=8), [material],
+                         grid.Environment("black", 0.0), 1, seed=1)
+add_sun(scene, angle_deg=5.0)
+add_point_lamp(scene, position=(2.0, -1.0, 5.0), radius=0.3, power=300.0)
+os.environ["OSL_OPTIONS"] = "statistics:level=1"  # printed as the render's OSL system goes
+sys.stdout.flush()
+saved = os.dup(1)
+with tempfile.TemporaryFile() as out:
+    os.dup2(out.fileno(), 1)
+    try:
+        image, _ = harness.render(scene)
+    finally:
+        ctypes.CDLL(None).fflush(None)
+        os.dup2(saved, 1)
+        os.close(saved)
+    out.seek(0)
+    printed = out.read().decode(errors="replace")
+left = [int(n) for n in re.findall(r"Optimized \d+ ops to (\d+)", printed)]
+report({"ops": sum(left), "listed": len(left), "finite": bool((image == image).all())})
+"""
+
+
+def test_lamp_kinds_absent_from_the_table_compile_out(tmp_path):
+    """Under a sun and a point lamp, the area lamps' code folds away (osl/lamps.h lamp_is, the
+    table's MFL_LAMP_KINDS flags): fewer operations left after OSL's runtime optimization
+    than with every kind declared present, for the same lamps and image. What it catches: a
+    kind test the optimizer cannot fold (with a shift of the flags all the kinds' code stayed,
+    as it does with this test's lamp_is reduced to lamp_kind: then both counts are 15,683)."""
+    from bpy_helpers import run_bpy_script
+
+    ops = {}
+    for declared in ("table", "all"):
+        work = tmp_path / declared
+        work.mkdir()
+        out = run_bpy_script(KINDS_FOLDED, work, str(ROOT), declared)
+        assert out["listed"] > 0 and out["finite"], out["_log"]
+        ops[declared] = out["ops"]
+    assert ops["table"] < ops["all"], ops
 
 
 def test_light_linking_holds_for_aimed_rays():

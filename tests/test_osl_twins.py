@@ -47,6 +47,9 @@ OSL_ONLY = {
         "and the clamp, and eval_residual",
     ("lamps.h", "lamp_vector"): "reads the generated lamp table; numpy reads LampRecord fields",
     ("lamps.h", "lamp_kind"): "reads the generated lamp table; numpy reads LampRecord.kind",
+    ("lamps.h", "lamp_is"): "lamp_kind compared, folded where the table has no such lamp; "
+                            "numpy compares LampRecord.kind",
+    ("lamps.h", "lamp_is_area"): "lamp_is for both area shapes; numpy compares LampRecord.kind",
     ("lamps.h", "lamp_u"): "reads an area lamp's enlarged axis from the table; numpy: extents",
     ("lamps.h", "lamp_v"): "reads an area lamp's enlarged axis from the table; numpy: extents",
     ("lamps.h", "sample_lamps_local"): "sample_lamps in the shading frame; numpy's frame is the "
