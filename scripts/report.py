@@ -6,7 +6,8 @@ section; its __init__ lists them).
 
     python scripts/report.py            # full (about 30-36 min on 2 cores); refreshes docs/figures
     python scripts/report.py --quick    # about 5 minutes
-    python scripts/report.py --smoke    # seconds: 2 sample counts, one tiny grid, one environment
+    python scripts/report.py --smoke    # a minute: 2 sample counts, one tiny grid (no Stochastic
+                                        # row beside its Native + Residual twin), one environment
     python scripts/report.py --quick --sections convergence --rows "Heitz 2016" --envs sun,point
 """
 import argparse

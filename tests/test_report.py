@@ -1,9 +1,10 @@
 """`make report` in its smoke mode: the page, the plots and the numbers exist and make sense.
 
-The smoke run (scripts/report.py --smoke: two sample counts, one tiny grid per model variant,
-the gradient environment, a small stability sweep, no OSL stress grid, the Lee section at tiny
-settings) runs in a fresh process, so it also checks the command line. The helpers that turn
-curves into the table are tested on synthetic curves whose answer is known.
+The smoke run (scripts/report.py --smoke: two sample counts, one tiny grid per model variant
+without the Stochastic rows that have a Native + Residual twin, the gradient environment, a
+small stability sweep, no OSL stress grid, the Lee section at tiny settings) runs in a fresh
+process, so it also checks the command line. The helpers that turn curves into the table are
+tested on synthetic curves whose answer is known.
 """
 import json
 import math
