@@ -160,6 +160,9 @@ report({"ops": sum(left), "listed": len(left), "finite": bool((image == image).a
 """
 
 
+# Compile time, not the image: the pinned release's OSL (4.2.23, 4.5.15 and 5.0.1 passed it too
+# on 2026-12-06).
+@pytest.mark.release_only
 def test_lamp_kinds_absent_from_the_table_compile_out(tmp_path):
     """Under a sun and a point lamp, the area lamps' code folds away (osl/lamps.h lamp_is, the
     table's MFL_LAMP_KINDS flags): fewer operations left after OSL's runtime optimization
