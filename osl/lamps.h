@@ -81,13 +81,9 @@ int lamp_kind(int i)
 
 int lamp_is(int i, int kind)
 {
-#if MFL_LAMP_ONE_KIND >= 0
-    return kind == MFL_LAMP_ONE_KIND;
-#else
     // An array, not bits: the optimizer folds a constant array's element, not a shift.
     int present[4] = {MFL_LAMP_KINDS};
     return present[kind] * (lamp_kind(i) == kind);
-#endif
 }
 
 // A rectangle or an ellipse (else a sun or a sphere lamp): 0 wherever the table has neither.
@@ -243,7 +239,7 @@ float lamp_pdf(int i, point P, vector dir)
         float s = dot(q, u) / dot(u, u);
         float t = dot(q, v) / dot(v, v);
         int inside = lamp_is(i, MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
-                                                        : (abs(s) <= 1.0 && abs(t) <= 1.0);
+                                                  : (abs(s) <= 1.0 && abs(t) <= 1.0);
         return inside ? dist * dist / (lamp_area(i) * cos_l) : 0.0;
     }
 }
@@ -258,7 +254,7 @@ int lamp_bounding_cone(int i, point P, output vector axis, output float th)
         if (!lamp_cone(i, P, axis, omc, sin2))
             return 0;
         th = lamp_is(i, MFL_LAMP_SUN) ? 2.0 * asin(sqrt(0.5 * omc))
-                                            : asin(sqrt(clamp(sin2, 0.0, 1.0)));
+                                      : asin(sqrt(clamp(sin2, 0.0, 1.0)));
         return 1;
     }
     else {

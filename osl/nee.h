@@ -79,7 +79,7 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
         float s = dot(q, u) / dot(u, u);
         float t = dot(q, v) / dot(v, v);
         int inside = lamp_is(i, MFL_LAMP_ELLIPSE) ? (s * s + t * t <= 1.0)
-                                                        : (abs(s) <= 1.0 && abs(t) <= 1.0);
+                                                  : (abs(s) <= 1.0 && abs(t) <= 1.0);
         return inside ? L : color(0.0);
     }
 }
