@@ -1,8 +1,9 @@
 """Rendered sphere grids against the numpy reference (headless Cycles with OSL), one body of
 tests for every suite of tests/grid_suites.py:
 
-- `models`: Cook-Torrance and Walter reflection, every sampler, masking and estimator, roughness
-  0.05 .. 1, against the reference computed by quadrature of the model's evaluation formula
+- `models` and `models-stochastic` (the Stochastic estimator's rows, at more samples):
+  Cook-Torrance and Walter reflection, every sampler, masking and estimator, roughness 0.05 .. 1,
+  against the reference computed by quadrature of the model's evaluation formula
   (addon/lab/reference/quadrature.py), which shares no code with the samplers the shaders use;
 - `lee`: Lee 2018 V-grooves (symmetric and asymmetric, GGX and Beckmann, gold) against LeeBRDF's
   deterministic directional moments (addon/lab/reference/lee/directional_moments.py, checked
