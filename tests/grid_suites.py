@@ -106,7 +106,9 @@ _LEE_SPECS = [SphereSpec("lee_vgroove", {"groove": g, "distribution": d,
                          f"lee {g} {d} r={r}")
               for g in ("symmetric", "asymmetric") for d in ("ggx", "beckmann") for r in ROUGHNESS]
 
-LEE = Suite("lee", _LEE_SPECS, samples=256, cell_px=32,
+# 128 samples: the power check uses at most 0.73 of its margin (asymmetric GGX at roughness 1
+# under the gradient; 0.54 at 256 samples, measured).
+LEE = Suite("lee", _LEE_SPECS, samples=128, cell_px=32,
             compute_tables=lambda: (grid.reference_tables(_LEE_SPECS), None),
             floors=lambda: [lee_floor(s) for s in _LEE_SPECS])
 
