@@ -26,7 +26,8 @@ COMPAT ?= 4.2 4.5 5.0  # oldest first: scripts/test_lanes.sh runs its whole suit
 # twin, and the report's smoke run (the report is lab tooling). In make test, on 4.2 LTS only
 # (not on the versions between it and the pinned release, whose API branches it and the pinned
 # release bracket: tests/conftest.py, `oldest_only`): the lamps' maths (the residual, the
-# controls, the control variate), the sun on a face's horizon and the lab's harness.
+# controls, the control variate), the sun on a face's horizon, a world spot's texels read against
+# Cycles' own lookup and the lab's harness.
 COMPAT_PYS = $$(for v in $(COMPAT); do $(VENV_SH) tests/compat/requirements-$$v.txt; done)
 
 .PHONY: venv venvs test test-full test-compat test-fast demo report package assets thumbnails bench-animation lee-furnace fallback-fit tables clean

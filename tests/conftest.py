@@ -18,12 +18,14 @@
 
 - `oldest_only`: in a compat module, run by the compatibility suite on the oldest supported
   Blender (4.2 LTS) and not on the versions between it and the pinned release: Cycles' maths
-  under lamps (the shaders' split, the aimed residual, the controls) and the lab's own harness.
+  under lamps (the shaders' split, the aimed residual, the controls), the shaders' reading of
+  a world spot's texels against Cycles' own lookup (tests/test_world_handover.py) and the lab's
+  own harness.
   Each of addon/compat.py's differences that these reach (the conductor's Fresnel, the
   back-face IOR) takes on 4.5 and 5.0 the way it takes on one of the two ends, and the two ends
   run them; the versions between keep everything that calls Blender's API (install, node
   groups, presets, assets, CLI, hand-over of lamps and world, native branches). Set below by
-  module.
+  module, or on the test.
 
 A test that uses a fixture which renders is a render test whatever its own marks say, so the
 two lanes never both pay for one fixture (the report's smoke run is two minutes).
