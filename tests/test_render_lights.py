@@ -162,8 +162,10 @@ def _assert_bands_match(layout, specs, image, reference, quad_err, power=None):
     for i, spec in enumerate(specs if power else ()):
         bright = max((b for b in tested if b.sphere == i),
                      key=lambda b: float(np.max(b.reference)))
-        assert float(np.max(bright.stderr)) * z_crit < power * float(np.max(bright.reference)), \
-            spec.label
+        detectable = max(float(np.max(bright.stderr)) * z_crit, 1e-30)
+        margin = power * float(np.max(bright.reference)) / detectable
+        print(f"\n[lights] {spec.label}: power margin {margin:.2f}")
+        assert margin > 1.0, spec.label
     return tested, z_crit
 
 
@@ -364,7 +366,8 @@ LEE_LAYOUT = grid.GridLayout(rows=2, cols=len(LEE_ROW), cell_px=64, spacing=LAYO
 # Small cells: enough samples that a 5% bias of the brightest band shows. Power margins (5% of
 # the band over z_crit times its stderr), symmetric / asymmetric: 11.9 / 20.5 at 4096 samples
 # (7.3 / 9.1 before the control variate's four directions over a wide lamp); 8.2 / 10.6 at 1024
-# (measured).
+# (measured; 7.6 / 10.7 on 2026-12-06). At 512 they read 8.9 / 5.0: the symmetric grooves' noise
+# looked smaller with fewer samples, the rare heavy samples not yet drawn, so not fewer.
 LEE_SAMPLES = 1024
 
 
