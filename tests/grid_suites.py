@@ -82,10 +82,10 @@ def _models_suite(name, rows, samples):
                  compute_tables=lambda: (grid.reference_tables(specs), None))
 
 
-# The two stochastic rows render apart: they need 256 samples for the power check (separable
-# D cos at roughness 1 used 0.97 of it under the gradient, measured), the rest 192 (their worst,
-# Cook-Torrance and Beckmann D cos at roughness 1, used 0.77 of it at 256 samples, so about 0.89
-# at 192). A quarter fewer samples on 48 of the 56 spheres.
+# The two stochastic rows render apart at 256 samples, the rest at 192. Power use, measured under
+# the gradient (the worst environment): the stochastic rows' worst 0.86 (separable D cos at
+# roughness 1; 0.97 in the shared grid, on other pixels); the others' worst 0.88 at 192 samples
+# (Beckmann D cos at roughness 1; Cook-Torrance's and Beckmann's D cos 0.75-0.77 at 256).
 MODELS_SUITE = _models_suite("models", _MODEL_ROWS, samples=192)
 MODELS_STOCHASTIC = _models_suite("models-stochastic", _STOCHASTIC_ROWS, samples=256)
 
