@@ -110,23 +110,23 @@ color cone_value_lo(int masking, int dist, int fresnel_type, int split, vector w
 // ---------------------------------------------------------------------------------------
 // The controls.
 
-// The chosen cones (table order, brightest first): lamps with weight at P whose cone, widened as
-// far as control_cone may (MFL_CONTROL_GROW_MAX), clears the horizons of N and Ng and every cone
-// chosen before; returns how many.
-int select_cones(point P, normal Ng, normal Ns, int set, output vector axes[MFL_CONTROL_SLOTS],
+// The chosen cones (table order, brightest first): lamps with weight at P (site: lamps.h
+// lamp_site) whose cone, widened as far as control_cone may (MFL_CONTROL_GROW_MAX), clears the
+// horizons of N and Ng and every cone chosen before; returns how many.
+int select_cones(LampSite site, int set, output vector axes[MFL_CONTROL_SLOTS],
                  output float ths[MFL_CONTROL_SLOTS])
 {
     int count = 0;
 #if MFL_LAMP_COUNT > 0
     for (int i = 0; i < MFL_LAMP_COUNT && count < MFL_CONTROL_SLOTS; i++) {
-        vector a;
-        float th;
-        if (lamp_share(i, P, Ng, set) <= 0.0 || !lamp_bounding_cone(i, P, a, th))
+        if (lamp_share(site, i, set, 1) <= 0.0 || !site.bounded[i])
             continue;
+        vector a = site.axis[i];
+        float th = site.th[i];
         float reach = max(th, MFL_CONTROL_GROW_MAX);
         float clear = sin(reach) + MFL_CONTROL_HORIZON_MARGIN;
         if (th < MFL_CONTROL_MIN_HALF_ANGLE || th >= 0.5 * MFL_PI || dot(a, Ng) <= clear ||
-            dot(a, Ns) <= clear)
+            dot(a, N) <= clear)
             continue;
         int apart = 1;
         for (int j = 0; j < count; j++)
@@ -180,12 +180,13 @@ color control_cone(int masking, int dist, int fresnel_type, int split, vector wi
 // The controls of a reflection residual (masking, dist, ... as cone_value_lo; split: whether the
 // GGX native part is returned beside it): their closures, tint times w_K times the toon;
 // weights[j] = w_K without the tint (0 where left out) and ths[j] its cone, for controls_value;
-// lamp_ths[j] the lamp's own cone within it. set, in and out: the lamps controlled (lamp_share).
+// lamp_ths[j] the lamp's own cone within it. set, in and out: the lamps controlled (lamp_share;
+// site: lamps.h lamp_site).
 // From MFL_LAMPS_AIMED (the control variate of nee.h takes the predicted lamps), a control for
 // another lamp turns the pair off: then every lamp is controlled and aimed at (MFL_LAMPS_ALL).
 // The second pass is a loop, not a second call: OSL inlines every call, and two calls made the
 // Lee shader 40% larger after optimization.
-closure color control_terms(int masking, int dist, int fresnel_type, int split,
+closure color control_terms(LampSite site, int masking, int dist, int fresnel_type, int split,
                             output int set, vector wi, vector t, vector b, float ax, float ay,
                             float ior, color n, color k,
                             color tint, output vector axes[MFL_CONTROL_SLOTS],
@@ -196,7 +197,7 @@ closure color control_terms(int masking, int dist, int fresnel_type, int split,
     closure color controls = 0;
     for (int pass = 0; pass < 2; pass++) {
         controls = 0;
-        count = select_cones(P, Ng, N, set, axes, ths);
+        count = select_cones(site, set, axes, ths);
         for (int j = 0; j < count; j++) {
             float th = ths[j];
             lamp_ths[j] = th;
@@ -254,9 +255,9 @@ vector nearest_in_cone(vector a, float th, vector R)
 // a lamp the controls carry needs no aim. Any lam in (0, 1) keeps the one-sample balance
 // heuristic exact (Veach 1997, sec. 9.2.4): sampling and density use the same (masking, ...:
 // as cone_value_lo; c, exact: the native part's factor and whether its Fresnel is the model's).
-float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, int exact,
-                              int set, vector wi, vector t, vector b, float ax, float ay, float ior,
-                              color n, color k, color tint, int count,
+float residual_guide_fraction(LampSite site, int masking, int dist, int fresnel_type, color c,
+                              int exact, int set, vector wi, vector t, vector b, float ax,
+                              float ay, float ior, color n, color k, color tint, int count,
                               vector axes[MFL_CONTROL_SLOTS], float ths[MFL_CONTROL_SLOTS],
                               color weights[MFL_CONTROL_SLOTS])
 {
@@ -265,12 +266,11 @@ float residual_guide_fraction(int masking, int dist, int fresnel_type, color c, 
 #if MFL_LAMP_COUNT > 0
     vector R = reflect(-I, N);
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float E = lamp_share(i, P, Ng, set);
-        vector a;
-        float th;
-        if (E <= 0.0 || !lamp_bounding_cone(i, P, a, th))
+        float E = lamp_share(site, i, set, 1);
+        if (E <= 0.0 || !site.bounded[i])
             continue;
-        vector d = nearest_in_cone(a, th, R);
+        float th = site.th[i];
+        vector d = nearest_in_cone(site.axis[i], th, R);
         vector wo = to_local(d, t, b, N);
         if (wo[2] <= 0.0 || wi[2] <= 0.0)
             continue;

@@ -54,6 +54,27 @@ int in_cone(vector dir, vector axis, float sin2)
 // The uniform density over a cone of half-angle th: 1 / (2 pi (1 - cos th)).
 float cone_density(float th) { return 1.0 / (4.0 * MFL_PI * sin(0.5 * th) * sin(0.5 * th)); }
 
+// The lamps as seen from the shading point, computed once per shader by lamp_site: what the
+// functions below ask of each lamp again and again. OSL inlines every call, and each call of
+// lamp_share or lamp_bounding_cone was a copy of their code (20-40 in Lee's shader: under a sun,
+// a point and an area lamp its runtime compile took 9 s of 10; docs/cycles-osl.md, "Constant
+// folding").
+#if MFL_LAMP_COUNT > 0
+#define MFL_LAMP_SLOTS MFL_LAMP_COUNT
+#else
+#define MFL_LAMP_SLOTS 1
+#endif
+struct LampSite {
+    float weight[MFL_LAMP_SLOTS];    // lamp_weight with the shading normal N
+    float weight_g[MFL_LAMP_SLOTS];  // lamp_weight with the geometric normal Ng
+    int estimated[MFL_LAMP_SLOTS];   // lamp_estimated
+    int bounded[MFL_LAMP_SLOTS];     // lamp_bounding_cone: whether there is one, its axis and th
+    vector axis[MFL_LAMP_SLOTS];     // (a sun's or a sphere lamp's: lamp_cone's axis too)
+    float th[MFL_LAMP_SLOTS];
+    float omc[MFL_LAMP_SLOTS];       // lamp_cone's 1 - cos and sin^2 (suns and sphere lamps)
+    float sin2[MFL_LAMP_SLOTS];
+};
+
 #if MFL_LAMP_COUNT > 0
 vector lamp_vector(int i, int j)
 {
@@ -178,7 +199,7 @@ int lamp_texels(int i)
 
 // A direction toward lamp i from P (world space), drawn from p_i: over a world spot's texels by
 // their light (spots.h) where the shaders read them.
-vector sample_lamp(int i, point P, float u1, float u2)
+vector sample_lamp(LampSite site, int i, float u1, float u2)
 {
 #if MFL_SPOT_TEXELS
     int texels = lamp_texels(i);
@@ -186,11 +207,9 @@ vector sample_lamp(int i, point P, float u1, float u2)
         return spot_sample(texels, u1, u2);
 #endif
     if (!lamp_is_area(i)) {
-        vector axis;
-        float omc, sin2;
-        if (!lamp_cone(i, P, axis, omc, sin2))
+        if (!site.bounded[i])
             return vector(0, 0, 1);
-        return sample_cone(axis, omc, u1, u2);
+        return sample_cone(site.axis[i], site.omc[i], u1, u2);
     }
     else {
         float s, t;
@@ -210,7 +229,7 @@ vector sample_lamp(int i, point P, float u1, float u2)
 
 // p_i(dir) over solid angle: uniform over a cone, or area density dist^2 / (A |cos|); a world
 // spot's over its texels (spots.h) where the shaders read them.
-float lamp_pdf(int i, point P, vector dir)
+float lamp_pdf(LampSite site, int i, vector dir)
 {
 #if MFL_SPOT_TEXELS
     int texels = lamp_texels(i);
@@ -218,11 +237,10 @@ float lamp_pdf(int i, point P, vector dir)
         return spot_pdf(texels, dir);
 #endif
     if (!lamp_is_area(i)) {
-        vector axis;
-        float omc, sin2;
-        if (!lamp_cone(i, P, axis, omc, sin2))
+        if (!site.bounded[i])
             return 0.0;
-        return in_cone(dir, axis, sin2) ? 1.0 / (2.0 * MFL_PI * omc) : 0.0;
+        return in_cone(dir, site.axis[i], site.sin2[i]) ? 1.0 / (2.0 * MFL_PI * site.omc[i])
+                                                        : 0.0;
     }
     else {
         vector n = lamp_vector(i, 4);
@@ -298,20 +316,19 @@ float nee_horizon() { return min(0.9 * dot(I, Ng), 0.01) + MFL_NEE_HORIZON_MARGI
 // reaches below nee_horizon (lamp_estimated).
 #define MFL_NEE_WIDE_LAMP 0.1
 
-// Whether nee.h may estimate lamp i from P, over the geometric surface (the global Ng: callers
-// pass the shading normal as theirs): where every direction toward it rises above nee_horizon,
-// or where it is wide. The directions above a line at a positive height form a convex cone, so
-// an area lamp lies in it where its four corners do (an ellipse's bounding rectangle's); a sun
-// or a sphere lamp where its cone does. Below the line the estimate counts nothing either way
-// (nee.h lamps_light); what the rule keeps out is a small lamp there: the deltas Cycles turns
-// onto the line from under it meet it unaimed, rare and heavy (a point lamp on Suzanne's
-// horizon: pixels of +12 at 64 samples). A wide lamp meets them often and lightly, and the
-// estimate above the line is worth more (docs/noise-measurements.md, sec. 16).
-int lamp_estimable(int i, point P)
+// Whether nee.h may estimate lamp i from P (bounded, axis, th: its bounding cone), over the
+// geometric surface (Ng; the weights also have one with N, lamp_site): where every direction
+// toward it rises above nee_horizon, or where it is wide. The directions above a line at a
+// positive height form a convex cone, so an area lamp lies in it where its four corners do (an
+// ellipse's bounding rectangle's); a sun or a sphere lamp where its cone does. Below the line
+// the estimate counts nothing either way (nee.h lamps_light); what the rule keeps out is a
+// small lamp there: the deltas Cycles turns onto the line from under it meet it unaimed, rare
+// and heavy (a point lamp on Suzanne's horizon: pixels of +12 at 64 samples). A wide lamp meets
+// them often and lightly, and the estimate above the line is worth more
+// (docs/noise-measurements.md, sec. 16).
+int lamp_estimable(int i, point P, int bounded, vector axis, float th)
 {
-    vector axis;
-    float th;
-    if (!lamp_bounding_cone(i, P, axis, th))
+    if (!bounded)
         return 0;
     if (th >= MFL_NEE_WIDE_LAMP)
         return 1;
@@ -335,56 +352,86 @@ int lamp_estimable(int i, point P)
 }
 
 // Whether nee.h estimates lamp i's light here: a predicted radiance, on the camera's hits, and
-// the lamp wholly above nee_horizon or wide (lamp_estimable). The estimate and its subtraction
-// count only directions above the line (nee.h lamps_light): Cycles turns the deltas drawn under
-// it onto it, in or out of the lamp, so a subtraction there would not pair with them (under a
-// 1-degree sun: pixels of -260). A small lamp reaching below it stays aimed at.
-int lamp_estimated(int i, point P)
+// the lamp wholly above nee_horizon or wide (lamp_estimable; bounded, axis, th: its bounding
+// cone, lamp_bounding_cone). The estimate and its subtraction count only directions above the
+// line (nee.h lamps_light): Cycles turns the deltas drawn under it onto it, in or out of the
+// lamp, so a subtraction there would not pair with them (under a 1-degree sun: pixels of -260).
+// A small lamp reaching below it stays aimed at.
+int lamp_estimated(int i, point P, int bounded, vector axis, float th)
 {
     color L = lamp_predicted(i);
-    return L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here() && lamp_estimable(i, P);
+    return L[0] + L[1] + L[2] > 0.0 && lamps_estimated_here() &&
+           lamp_estimable(i, P, bounded, axis, th);
+}
+#endif
+
+// Fills the LampSite of the shading point P (its normals N and Ng).
+void lamp_site(output LampSite site)
+{
+#if MFL_LAMP_COUNT > 0
+    for (int i = 0; i < MFL_LAMP_COUNT; i++) {
+        site.weight[i] = lamp_weight(i, P, N);
+        site.weight_g[i] = lamp_weight(i, P, Ng);
+        vector axis = vector(0, 0, 1);
+        float th = 0.0;
+        int bounded = lamp_bounding_cone(i, P, axis, th);
+        float omc = 0.0;
+        float sin2 = 0.0;
+        if (!lamp_is_area(i)) {
+            vector cone_axis;
+            lamp_cone(i, P, cone_axis, omc, sin2);
+        }
+        site.bounded[i] = bounded;
+        site.axis[i] = axis;
+        site.th[i] = th;
+        site.omc[i] = omc;
+        site.sin2[i] = sin2;
+        site.estimated[i] = lamp_estimated(i, P, bounded, axis, th);
+    }
+#endif
 }
 
+#if MFL_LAMP_COUNT > 0
 // Lamp i's weight in a set: MFL_LAMPS_PREDICTED the lamps nee.h estimates here
 // (lamp_estimated), MFL_LAMPS_AIMED the others, which the residual aims at, MFL_LAMPS_ALL every
-// lamp.
-float lamp_share(int i, point P, normal Ng, int set)
+// lamp; lamp_weight with the shading normal N, or with Ng where geometric.
+float lamp_share(LampSite site, int i, int set, int geometric)
 {
+    float w = geometric ? site.weight_g[i] : site.weight[i];
     if (set == MFL_LAMPS_ALL)
-        return lamp_weight(i, P, Ng);
-    int estimated = lamp_estimated(i, P);
-    return (estimated == (set == MFL_LAMPS_PREDICTED)) ? lamp_weight(i, P, Ng) : 0.0;
+        return w;
+    return (site.estimated[i] == (set == MFL_LAMPS_PREDICTED)) ? w : 0.0;
 }
 
-float lamps_total_weight(point P, normal Ng, int set)
+float lamps_total_weight(LampSite site, int set)
 {
     float total = 0.0;
     for (int i = 0; i < MFL_LAMP_COUNT; i++)
-        total += lamp_share(i, P, Ng, set);
+        total += lamp_share(site, i, set, 0);
     return total;
 }
 
 // sum_j pi_j p_j(dir) over a set, pi_j = weight_j / total.
-float lamps_pdf(point P, normal Ng, float total, vector dir, int set)
+float lamps_pdf(LampSite site, float total, vector dir, int set)
 {
     if (total <= 0.0)
         return 0.0;
     float pdf = 0.0;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float w = lamp_share(i, P, Ng, set);
+        float w = lamp_share(site, i, set, 0);
         if (w > 0.0)
-            pdf += w * lamp_pdf(i, P, dir);
+            pdf += w * lamp_pdf(site, i, dir);
     }
     return pdf / total;
 }
 
 // Lamp j of a set with probability pi_j, then a direction from p_j.
-vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u2, int set)
+vector sample_lamps(LampSite site, float total, float u0, float u1, float u2, int set)
 {
     float target = u0 * total;
     int chosen = -1;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        float w = lamp_share(i, P, Ng, set);
+        float w = lamp_share(site, i, set, 0);
         if (w > 0.0) {
             chosen = i;  // the last lamp with weight catches rounding at u0 near 1
             if (target < w)
@@ -392,39 +439,39 @@ vector sample_lamps(point P, normal Ng, float total, float u0, float u1, float u
             target -= w;
         }
     }
-    return (chosen >= 0) ? sample_lamp(chosen, P, u1, u2) : vector(0, 0, 1);
+    return (chosen >= 0) ? sample_lamp(site, chosen, u1, u2) : vector(0, 0, 1);
 }
 #endif
 
 // lam for a shading point: MFL_GUIDE_FRACTION when some lamp of the set has weight there, else
 // 0; total receives the sum of their weights.
-float guide_fraction(point P, normal Ng, int set, output float total)
+float guide_fraction(LampSite site, int set, output float total)
 {
     total = 0.0;
 #if MFL_LAMP_COUNT > 0
-    total = lamps_total_weight(P, Ng, set);
+    total = lamps_total_weight(site, set);
     if (total > 0.0)
         return MFL_GUIDE_FRACTION;
 #endif
     return 0.0;
 }
 
-vector sample_lamps_local(point P, normal Ng, float total, vector t, vector b, normal n,
-                          vector key, int set)
+vector sample_lamps_local(LampSite site, float total, vector t, vector b, normal n, vector key,
+                          int set)
 {
 #if MFL_LAMP_COUNT > 0
-    vector dir = sample_lamps(P, Ng, total, rng(key, 7), rng(key, 8), rng(key, 9), set);
+    vector dir = sample_lamps(site, total, rng(key, 7), rng(key, 8), rng(key, 9), set);
     return to_local(dir, t, b, n);
 #else
     return vector(0, 0, 1);
 #endif
 }
 
-float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, vector b,
-                          normal n, int set)
+float lamps_density_local(LampSite site, float total, vector wo, vector t, vector b, normal n,
+                          int set)
 {
 #if MFL_LAMP_COUNT > 0
-    return lamps_pdf(P, Ng, total, to_world(wo, t, b, n), set);
+    return lamps_pdf(site, total, to_world(wo, t, b, n), set);
 #else
     return 0.0;
 #endif
@@ -440,15 +487,15 @@ float lamps_density_local(point P, normal Ng, float total, vector wo, vector t, 
 // sampler alone would give wo, which split_closures chooses with (a choice made from the
 // guided weight itself would undo the aiming: see split_closures). set: the lamps aimed at
 // (lamp_share). 0 for an invalid sample.
-float sample_guided_residual(int sampler, int dist, vector wi, float ax, float ay, vector t,
-                             vector b, normal n, vector key, float lam_hint, int set,
-                             output vector m, output vector wo, output float model_share,
+float sample_guided_residual(LampSite site, int sampler, int dist, vector wi, float ax,
+                             float ay, vector t, vector b, normal n, vector key, float lam_hint,
+                             int set, output vector m, output vector wo, output float model_share,
                              output float pdf)
 {
     model_share = 1.0;
     pdf = 0.0;
     float total;
-    float lam = (guide_fraction(P, n, set, total) > 0.0) ? lam_hint : 0.0;
+    float lam = (guide_fraction(site, set, total) > 0.0) ? lam_hint : 0.0;
     if (lam <= 0.0 || rng(key, 6) >= lam) {
         float factor = sample_reflection_factor(sampler, dist, wi, ax, ay, key, m);
         wo = reflect_about(wi, m);
@@ -456,13 +503,13 @@ float sample_guided_residual(int sampler, int dist, vector wi, float ax, float a
             return factor;
     }
     else {
-        wo = sample_lamps_local(P, n, total, t, b, n, key, set);
+        wo = sample_lamps_local(site, total, t, b, n, key, set);
         m = normalize(wi + wo);
     }
     if (wi[2] <= 0.0 || wo[2] <= 0.0)
         return 0.0;
     float p_model = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
-    pdf = p_model + lam * lamps_density_local(P, n, total, wo, t, b, n, set);
+    pdf = p_model + lam * lamps_density_local(site, total, wo, t, b, n, set);
     if (pdf <= 0.0)
         return 0.0;
     model_share = p_model / pdf;

@@ -87,15 +87,16 @@ color lamp_radiance(int i, point P, vector dir, output float dist)
 
 // The predicted radiance toward dir of the lamps estimated here (lamps.h lamp_estimated: all
 // above the line under which Cycles turns a delta, so a delta toward them leaves as drawn),
-// times V (trace(): nothing in between; each lamp's ray stops short of it), summed.
-color lamps_light(point P, vector dir)
+// times V (trace(): nothing in between; each lamp's ray stops short of it), summed (site: lamps.h
+// lamp_site).
+color lamps_light(LampSite site, vector dir)
 {
     color sum = 0;
 #if MFL_LAMP_COUNT > 0
     if (dot(Ng, dir) < nee_horizon())
         return sum;
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        if (!lamp_estimated(i, P))
+        if (!site.estimated[i])
             continue;
         float dist;
         color L = lamp_radiance(i, P, dir, dist);
@@ -123,15 +124,14 @@ color lamps_light(point P, vector dir)
 // (docs/noise-measurements.md, sec. 19).
 #define MFL_NEE_LOBE_SHARE 0.5
 
-int nee_grid(point P, normal Ng, int stochastic, float alpha)
+int nee_grid(LampSite site, int stochastic, float alpha)
 {
     if (stochastic)
         return MFL_NEE_GRID;
 #if MFL_LAMP_COUNT > 0
     for (int i = 0; i < MFL_LAMP_COUNT; i++) {
-        vector axis;
-        float th;
-        if (lamp_share(i, P, Ng, 1) > 0.0 && lamp_bounding_cone(i, P, axis, th) &&
+        float th = site.th[i];
+        if (lamp_share(site, i, 1, 0) > 0.0 && site.bounded[i] &&
             (th >= MFL_NEE_WIDE_LAMP || (alpha > 0.0 && th >= MFL_NEE_LOBE_SHARE * alpha)))
             return MFL_NEE_GRID;
     }
@@ -144,24 +144,24 @@ int nee_grid(point P, normal Ng, int stochastic, float alpha)
 // sample_lamp) from cell j of the grid. The mean over j is an unbiased estimate: each cell is
 // drawn from uniformly and the cells tile the square. Returns 0 when no such lamp has weight;
 // else pdf receives p_n(w_n), the density of the cells' mixture (lamps_pdf), and light
-// lamps_light(P, w_n).
-int nee_sample(point P, normal Ng, vector key, int j, int grid, output vector dir,
-               output float pdf, output color light)
+// lamps_light(site, w_n).
+int nee_sample(LampSite site, vector key, int j, int grid, output vector dir, output float pdf,
+               output color light)
 {
     pdf = 0.0;
     light = 0;
 #if MFL_LAMP_COUNT > 0
-    float total = lamps_total_weight(P, Ng, 1);
+    float total = lamps_total_weight(site, 1);
     if (total <= 0.0)
         return 0;
     int dim = -10 - 3 * j;  // three per direction, clear of delta_weight's -1 and the roulette's -5
     float u1 = (float(j % grid) + rng(key, dim - 1)) / float(grid);
     float u2 = (float(j / grid) + rng(key, dim - 2)) / float(grid);
-    dir = sample_lamps(P, Ng, total, rng(key, dim), u1, u2, 1);
-    pdf = lamps_pdf(P, Ng, total, dir, 1);
+    dir = sample_lamps(site, total, rng(key, dim), u1, u2, 1);
+    pdf = lamps_pdf(site, total, dir, 1);
     if (pdf <= 0.0)
         return 0;
-    light = lamps_light(P, dir);
+    light = lamps_light(site, dir);
     return 1;
 #else
     return 0;
@@ -211,14 +211,14 @@ color nee_roulette(color W, color light, vector key)
     return (rng(key, -5) < m) ? W / m : color(0.0);
 }
 
-// The subtraction: the delta's weight W_d toward dir times light = lamps_light(P, dir), weighted
-// by the same share, nee_share(p_n, pd).
-color nee_cancel(point P, normal Ng, vector dir, color weight, color light, float pd)
+// The subtraction: the delta's weight W_d toward dir times light = lamps_light(site, dir),
+// weighted by the same share, nee_share(p_n, pd).
+color nee_cancel(LampSite site, vector dir, color weight, color light, float pd)
 {
 #if MFL_LAMP_COUNT > 0
     if (light[0] + light[1] + light[2] <= 0.0)
         return color(0.0);
-    float pn = lamps_pdf(P, Ng, lamps_total_weight(P, Ng, 1), dir, 1);
+    float pn = lamps_pdf(site, lamps_total_weight(site, 1), dir, 1);
     return weight * light * nee_share(pn, pd);
 #else
     return color(0.0);
@@ -227,28 +227,29 @@ color nee_cancel(point P, normal Ng, vector dir, color weight, color light, floa
 
 // The density of the guided residual's directions (lamps.h sample_guided_residual) toward wo
 // (shading frame): (1 - lam) p_model + lam p_lamps where some aimed lamp has weight at P.
-float guided_residual_pdf(int sampler, int dist, vector wi, vector wo, float ax, float ay,
-                          vector t, vector b, normal n, float lam_hint, int set)
+float guided_residual_pdf(LampSite site, int sampler, int dist, vector wi, vector wo, float ax,
+                          float ay, vector t, vector b, normal n, float lam_hint, int set)
 {
     if (wo[2] <= 0.0)
         return 0.0;
     vector m = normalize(wi + wo);
     float total;
-    float lam = (guide_fraction(P, n, set, total) > 0.0) ? lam_hint : 0.0;
+    float lam = (guide_fraction(site, set, total) > 0.0) ? lam_hint : 0.0;
     float p = (1.0 - lam) * reflection_pdf(sampler, dist, wi, m, ax, ay);
-    return (lam > 0.0) ? p + lam * lamps_density_local(P, n, total, wo, t, b, n, set) : p;
+    return (lam > 0.0) ? p + lam * lamps_density_local(site, total, wo, t, b, n, set) : p;
 }
 
 // The delta residual with weight W about the microfacet normal m (world space) toward dir, on
 // a shading point where the control variate is on (on), with its subtraction: pd the stand-in
 // for the delta's density the first term used (nee_estimate).
-closure color nee_delta(color W, normal m, vector dir, float pd, vector key, int on)
+closure color nee_delta(LampSite site, color W, normal m, vector dir, float pd, vector key,
+                        int on)
 {
-    color light = (on && W != color(0.0)) ? lamps_light(P, dir) : color(0.0);
+    color light = (on && W != color(0.0)) ? lamps_light(site, dir) : color(0.0);
     color Wr = nee_roulette(W, light, key);
     closure color lobe = Wr * delta_reflection(m);
     if (light != color(0.0))
-        lobe += nee_emission(-nee_cancel(P, N, dir, Wr, light, pd));
+        lobe += nee_emission(-nee_cancel(site, dir, Wr, light, pd));
     return lobe;
 }
 

@@ -64,6 +64,9 @@ OSL_ONLY = {
     ("lamps.h", "lamp_estimable"): "the control variate's horizon rule (nee.h, no twin)",
     ("lamps.h", "lamp_estimated"): "the control variate's lamps (nee.h, no twin); numpy's "
                                    "lamp_share models the hits off the camera's",
+    ("lamps.h", "lamp_site"): "fills the shading point's LampSite, what lamp_weight, "
+                              "lamp_bounding_cone, lamp_cone and lamp_estimated give there, "
+                              "computed once (OSL inlines every call); numpy calls them",
     ("lamps.h", "lamp_texels"): "reads a world spot's texel offset from the table; the "
                                 "reference's records sample a spot's cone, its texels' sampling "
                                 "has its twin in addon/world_spots.py (spots.h)",
