@@ -123,40 +123,53 @@ def test_a_hundred_lamps_compile_and_render():
     assert np.isfinite(image).all() and image[..., :3][index >= 0].mean() > 0
 
 
-KINDS_FOLDED = r"""
+# The head of the scripts that count the operations OSL's runtime optimization leaves: one
+# sphere's scene, and a render whose OSL statistics (printed as its OSL system goes) are caught.
+OPS_LEFT = r"""
 import ctypes, os, re, sys, tempfile
-root, declared = sys.argv[1:3]
-sys.path.insert(0, root)
+sys.path.insert(0, sys.argv[1])
 import bpy
-from addon import shaders
 from addon.lab import grid, harness
 from addon.lab.report.scenes import add_point_lamp, add_sun
+os.environ["OSL_OPTIONS"] = "statistics:level=1"
+
+
+def sphere_scene(model_id, values):
+    scene = harness.new_scene()
+    material = harness.model_material(model_id, values, model_id)
+    harness.build_grid_scene(grid.GridLayout(rows=1, cols=1, cell_px=8), [material],
+                             grid.Environment("black", 0.0), 1, seed=1)
+    return scene
+
+
+def ops_left(scene):
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with tempfile.TemporaryFile() as out:
+        os.dup2(out.fileno(), 1)
+        try:
+            image, _ = harness.render(scene)
+        finally:
+            ctypes.CDLL(None).fflush(None)
+            os.dup2(saved, 1)
+            os.close(saved)
+        out.seek(0)
+        printed = out.read().decode(errors="replace")
+    left = [int(n) for n in re.findall(r"Optimized \d+ ops to (\d+)", printed)]
+    return {"ops": sum(left), "listed": len(left), "finite": bool((image == image).all())}
+"""
+
+KINDS_FOLDED = OPS_LEFT + r"""
+from addon import shaders
 
 table = shaders.lamp_table_block
-if declared == "all":  # every kind declared present, as before the flags
+if sys.argv[2] == "all":  # every kind declared present, as before the flags
     shaders.lamp_table_block = lambda records: re.sub(
         "#define MFL_LAMP_KINDS .*", "#define MFL_LAMP_KINDS 1, 1, 1, 1", table(records))
-scene = harness.new_scene()
-material = harness.model_material("walter_reflection", {"roughness": 0.3}, "gold")
-harness.build_grid_scene(grid.GridLayout(rows=1, cols=1, cell_px=8), [material],
-                         grid.Environment("black", 0.0), 1, seed=1)
+scene = sphere_scene("walter_reflection", {"roughness": 0.3})
 add_sun(scene, angle_deg=5.0)
 add_point_lamp(scene, position=(2.0, -1.0, 5.0), radius=0.3, power=300.0)
-os.environ["OSL_OPTIONS"] = "statistics:level=1"  # printed as the render's OSL system goes
-sys.stdout.flush()
-saved = os.dup(1)
-with tempfile.TemporaryFile() as out:
-    os.dup2(out.fileno(), 1)
-    try:
-        image, _ = harness.render(scene)
-    finally:
-        ctypes.CDLL(None).fflush(None)
-        os.dup2(saved, 1)
-        os.close(saved)
-    out.seek(0)
-    printed = out.read().decode(errors="replace")
-left = [int(n) for n in re.findall(r"Optimized \d+ ops to (\d+)", printed)]
-report({"ops": sum(left), "listed": len(left), "finite": bool((image == image).all())})
+report(ops_left(scene))
 """
 
 
@@ -181,43 +194,20 @@ def test_lamp_kinds_absent_from_the_table_compile_out(tmp_path):
     assert ops["table"] < ops["all"], ops
 
 
-LAMP_SITE = r"""
-import ctypes, os, re, sys, tempfile
-root = sys.argv[1]
-sys.path.insert(0, root)
-import bpy
-from addon.lab import grid, harness
-from addon.lab.report.scenes import add_point_lamp, add_sun
-os.environ["OSL_OPTIONS"] = "statistics:level=1"  # printed as each render's OSL system goes
+LAMP_SITE = OPS_LEFT + r"""
 
 
-def ops_left(lamps):
-    scene = harness.new_scene()
-    material = harness.model_material("lee_vgroove", {"roughness": 0.6}, "lee")
-    harness.build_grid_scene(grid.GridLayout(rows=1, cols=1, cell_px=8), [material],
-                             grid.Environment("black", 0.0), 1, seed=1)
+def under(lamps):
+    scene = sphere_scene("lee_vgroove", {"roughness": 0.6})
     add_sun(scene, angle_deg=3.0)
     if lamps == "three":
         add_point_lamp(scene, position=(2.0, -1.0, 5.0), radius=0.3, power=300.0)
         bpy.ops.object.light_add(type="AREA", location=(-2.0, -2.0, 4.0))
         bpy.context.object.data.energy = 200.0
-    sys.stdout.flush()
-    saved = os.dup(1)
-    with tempfile.TemporaryFile() as out:
-        os.dup2(out.fileno(), 1)
-        try:
-            image, _ = harness.render(scene)
-        finally:
-            ctypes.CDLL(None).fflush(None)
-            os.dup2(saved, 1)
-            os.close(saved)
-        out.seek(0)
-        printed = out.read().decode(errors="replace")
-    left = [int(n) for n in re.findall(r"Optimized \d+ ops to (\d+)", printed)]
-    return {"ops": sum(left), "listed": len(left), "finite": bool((image == image).all())}
+    return ops_left(scene)
 
 
-report({"sun": ops_left("sun"), "three": ops_left("three")})
+report({"sun": under("sun"), "three": under("three")})
 """
 
 
