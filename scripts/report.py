@@ -4,7 +4,7 @@ per sample against Cook-Torrance, closed form against the tracer, moment rules),
 report/ (report.md, PNG plots, results.json). See the package addon/lab/report/ (one module per
 section; its __init__ lists them).
 
-    python scripts/report.py            # full (about 30-36 min on 2 cores); refreshes docs/figures
+    python scripts/report.py            # full (over an hour on 2 cores); refreshes docs/figures
     python scripts/report.py --quick    # about 5 minutes
     python scripts/report.py --smoke    # a minute: 2 sample counts, one tiny grid (no Stochastic
                                         # row beside its Native + Residual twin), one environment

@@ -5,7 +5,7 @@ from pathlib import Path
 
 REGENERATE = [
     "## How to regenerate\n",
-    "`make report` (full, about 30-36 minutes on 2 cores), `make report QUICK=1` (about 5 "
+    "`make report` (full, over an hour on 2 cores), `make report QUICK=1` (about 5 "
     "minutes: fewer samples, smaller grids, a subset of the sweep), "
     "`python scripts/report.py --smoke` (seconds; used by the tests). Output: `report/` "
     "(this page, PNGs, `results.json`); the full run also refreshes the README figures in "
